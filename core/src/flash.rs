@@ -1,0 +1,110 @@
+//! Flash-plane geometry (DESIGN §2, the paper's §"Dataset collection" set-up).
+//!
+//! The material is a square of side [`PLANE_SIDE`] = 1 centred at the origin in z = 0, normal
+//! +z, image row 0 at the top (+y). Camera and flash are collocated at `(lx, ly, 1)`: the
+//! height equals the plane side, as the paper assumes for phone cameras. `(lx, ly)` is the
+//! highlight position. Per texel, light and view direction are both `ω = normalize(L − p)`.
+
+use candle_core::{DType, Device, Tensor};
+use glam::DVec3;
+
+use crate::{Error, Result};
+
+/// Side length of the material square, in world units.
+pub const PLANE_SIDE: f64 = 1.0;
+/// Height of the collocated camera and flash above the plane.
+pub const FLASH_HEIGHT: f64 = 1.0;
+/// Flash intensity: π, so that a flat white Lambertian texel straight under the flash
+/// renders exactly its albedo (π · (1/π) · cos 0 / 1²).
+pub const FLASH_INTENSITY: f64 = std::f64::consts::PI;
+
+/// Highlight position in plane coordinates (x right, y up, the plane spans [−½, ½]²); the
+/// flash sits at `(x, y, FLASH_HEIGHT)`. It may lie outside the plane.
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
+pub struct Highlight {
+    pub x: f64,
+    pub y: f64,
+}
+
+impl Highlight {
+    /// Flash straight above the centre of the material.
+    pub const CENTER: Highlight = Highlight { x: 0.0, y: 0.0 };
+
+    pub fn new(x: f64, y: f64) -> Self {
+        Self { x, y }
+    }
+
+    /// From continuous pixel coordinates of an R×R image (pixel (i, j) spans [i, i+1)×[j, j+1)):
+    /// `x = col/R − ½`, `y = ½ − row/R`.
+    pub fn from_pixel(row: f64, col: f64, size: usize) -> Self {
+        let r = size as f64;
+        Self::new(col / r - 0.5, 0.5 - row / r)
+    }
+
+    /// Continuous pixel coordinates `(row, col)` in an R×R image; inverse of [`Self::from_pixel`].
+    pub fn to_pixel(self, size: usize) -> (f64, f64) {
+        let r = size as f64;
+        ((0.5 - self.y) * r, (self.x + 0.5) * r)
+    }
+
+    /// Position of the collocated flash and camera.
+    pub fn flash_position(self) -> DVec3 {
+        DVec3::new(self.x, self.y, FLASH_HEIGHT)
+    }
+}
+
+/// Centre of texel (row, col) of an R×R map: `((col+½)/R − ½, ½ − (row+½)/R, 0)`.
+pub fn texel_center(row: usize, col: usize, size: usize) -> DVec3 {
+    let r = size as f64;
+    DVec3::new(
+        ((col as f64 + 0.5) / r - 0.5) * PLANE_SIDE,
+        (0.5 - (row as f64 + 0.5) / r) * PLANE_SIDE,
+        0.0,
+    )
+}
+
+/// Per-texel flash geometry of a batch of R×R maps, one highlight per batch item.
+#[derive(Debug, Clone)]
+pub struct FlashGeometry {
+    /// Unit direction from each texel towards the flash (= towards the camera): (B, 3, R, R).
+    pub omega: Tensor,
+    /// Inverse squared distance texel–flash: (B, 1, R, R).
+    pub inv_dist2: Tensor,
+}
+
+impl FlashGeometry {
+    /// Geometry for `highlights.len()` flash positions over an R×R plane.
+    pub fn new(highlights: &[Highlight], size: usize, dtype: DType, device: &Device) -> Result<Self> {
+        if highlights.is_empty() || size == 0 {
+            return Err(Error::Invalid(
+                "flash geometry needs at least one highlight and a non-empty map".into(),
+            ));
+        }
+        if let Some(h) = highlights.iter().find(|h| !(h.x.is_finite() && h.y.is_finite())) {
+            return Err(Error::Invalid(format!("highlight ({}, {}) is not finite", h.x, h.y)));
+        }
+        let plane = size * size;
+        let mut omega = vec![0f64; highlights.len() * 3 * plane];
+        let mut inv_dist2 = vec![0f64; highlights.len() * plane];
+        for (b, h) in highlights.iter().enumerate() {
+            let light = h.flash_position();
+            for row in 0..size {
+                for col in 0..size {
+                    let to_light = light - texel_center(row, col, size);
+                    let d2 = to_light.length_squared(); // ≥ FLASH_HEIGHT² > 0
+                    let w = to_light / d2.sqrt();
+                    let t = row * size + col;
+                    omega[(b * 3) * plane + t] = w.x;
+                    omega[(b * 3 + 1) * plane + t] = w.y;
+                    omega[(b * 3 + 2) * plane + t] = w.z;
+                    inv_dist2[b * plane + t] = 1.0 / d2;
+                }
+            }
+        }
+        let n = highlights.len();
+        Ok(Self {
+            omega: Tensor::from_vec(omega, (n, 3, size, size), device)?.to_dtype(dtype)?,
+            inv_dist2: Tensor::from_vec(inv_dist2, (n, 1, size, size), device)?.to_dtype(dtype)?,
+        })
+    }
+}

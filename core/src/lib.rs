@@ -1,0 +1,46 @@
+//! # photomat-core
+//!
+//! The conventions every photomat crate shares (`shared/DESIGN.md` §2–3): the
+//! [`DifferentiableBrdf`] trait and its parameter specs, the plugin [`registry`], the shared
+//! [`microfacet`] maths, the collocated-[`flash`] plane geometry, the differentiable
+//! [`render`]er and the material-map folder format ([`map_files`]).
+//!
+//! Models live in `photomat-brdfs` (and in users' own crates); they register themselves with
+//! [`register_brdf!`] and are built by name with [`lookup`]:
+//!
+//! ```ignore
+//! use photomat_brdfs as _; // link the built-in plugins
+//! let model = photomat_core::lookup("height(ggx)")?;
+//! assert_eq!(model.channels(), 8);
+//! ```
+
+pub mod adapter;
+pub mod brdf;
+pub mod error;
+pub mod flash;
+pub mod lobes;
+pub mod map_files;
+pub mod maps;
+pub mod microfacet;
+pub mod param;
+pub mod plugin_spec;
+pub mod registry;
+pub mod render;
+pub mod shading;
+pub mod vecops;
+
+pub use adapter::{AdaptedBrdf, MapAdapter};
+pub use brdf::{Brdf, DifferentiableBrdf};
+pub use error::{Error, Result};
+pub use flash::{FlashGeometry, Highlight};
+pub use maps::MaterialMaps;
+pub use param::{ColorSpace, Encoding, ParamSpec};
+pub use registry::{ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations};
+pub use shading::ShadingGeometry;
+pub use render::{encode_display, render, render_radiance};
+
+/// Re-exports for [`register_brdf!`]; not part of the public API.
+#[doc(hidden)]
+pub mod __private {
+    pub use inventory;
+}

@@ -1,0 +1,182 @@
+//! `MaterialMaps`: the named parameter maps of one batch of materials.
+//!
+//! Shapes: every map is NCHW, (B, channels, H, W), all maps of a set sharing B, H and W.
+//! Maps of shape (B, C, 1, 1) are allowed where a model is evaluated on independent samples
+//! (brdf-eval, furnace tests): plugins broadcast maps against the direction tensors.
+
+use std::collections::BTreeMap;
+
+use candle_core::{DType, Device, Tensor};
+
+use crate::param::ParamSpec;
+use crate::{Error, Result};
+
+/// Named NCHW tensors, one per parameter of a BRDF model.
+#[derive(Debug, Clone, Default)]
+pub struct MaterialMaps {
+    maps: BTreeMap<String, Tensor>,
+}
+
+impl MaterialMaps {
+    /// An empty set.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Builder-style insertion.
+    pub fn with(mut self, name: impl Into<String>, map: Tensor) -> Self {
+        self.insert(name, map);
+        self
+    }
+
+    /// Insert or replace one map.
+    pub fn insert(&mut self, name: impl Into<String>, map: Tensor) {
+        self.maps.insert(name.into(), map);
+    }
+
+    /// Remove one map, returning it.
+    pub fn remove(&mut self, name: &str) -> Option<Tensor> {
+        self.maps.remove(name)
+    }
+
+    /// The map called `name`, or an error naming the maps that exist.
+    pub fn get(&self, name: &str) -> Result<&Tensor> {
+        self.maps.get(name).ok_or_else(|| {
+            Error::Invalid(format!(
+                "material has no '{name}' map (it has: {})",
+                self.names().join(", ")
+            ))
+        })
+    }
+
+    /// Whether a map called `name` exists.
+    pub fn contains(&self, name: &str) -> bool {
+        self.maps.contains_key(name)
+    }
+
+    /// Map names, sorted.
+    pub fn names(&self) -> Vec<&str> {
+        self.maps.keys().map(String::as_str).collect()
+    }
+
+    /// Iterate over (name, map), sorted by name.
+    pub fn iter(&self) -> impl Iterator<Item = (&str, &Tensor)> {
+        self.maps.iter().map(|(k, v)| (k.as_str(), v))
+    }
+
+    /// Apply `f` to every map (dtype or device conversion, detaching, narrowing a batch).
+    pub fn map_tensors(&self, mut f: impl FnMut(&Tensor) -> Result<Tensor>) -> Result<Self> {
+        let mut out = Self::new();
+        for (name, map) in &self.maps {
+            out.insert(name.clone(), f(map)?);
+        }
+        Ok(out)
+    }
+
+    /// Maps filled with each spec's default value: (batch, channels, size, size) per spec.
+    pub fn defaults(
+        specs: &[ParamSpec],
+        batch: usize,
+        size: usize,
+        dtype: DType,
+        device: &Device,
+    ) -> Result<Self> {
+        let mut out = Self::new();
+        for spec in specs {
+            let v = Tensor::new(spec.default, device)?
+                .to_dtype(dtype)?
+                .reshape((1, spec.channels, 1, 1))?
+                .broadcast_as((batch, spec.channels, size, size))?
+                .contiguous()?;
+            out.insert(spec.name, v);
+        }
+        Ok(out)
+    }
+
+    /// (B, H, W) shared by all maps; error if the set is empty or the maps disagree.
+    pub fn batch_and_size(&self) -> Result<(usize, usize, usize)> {
+        let mut shape: Option<(usize, usize, usize, &str)> = None;
+        for (name, map) in self.iter() {
+            let (b, _, h, w) = map.dims4().map_err(|_| {
+                Error::Invalid(format!(
+                    "map '{name}' must be NCHW (4 dims), got shape {:?}",
+                    map.dims()
+                ))
+            })?;
+            match shape {
+                None => shape = Some((b, h, w, name)),
+                Some((b0, h0, w0, first)) if (b0, h0, w0) != (b, h, w) => {
+                    return Err(Error::Invalid(format!(
+                        "map sizes differ: '{first}' is {b0}×{h0}×{w0} (batch×height×width), \
+                         '{name}' is {b}×{h}×{w}"
+                    )));
+                }
+                Some(_) => {}
+            }
+        }
+        shape
+            .map(|(b, h, w, _)| (b, h, w))
+            .ok_or_else(|| Error::Invalid("material has no maps".into()))
+    }
+
+    /// Full check at a trust boundary (files, command line): [`Self::validate_shapes`] plus
+    /// no NaN or infinity anywhere. Copies the maps to host memory.
+    pub fn validate(&self, model: &str, specs: &[ParamSpec]) -> Result<()> {
+        self.validate_shapes(model, specs)?;
+        for (name, map) in self.iter() {
+            let finite = map
+                .to_dtype(DType::F32)?
+                .flatten_all()?
+                .to_vec1::<f32>()?
+                .iter()
+                .all(|v| v.is_finite());
+            if !finite {
+                return Err(Error::InvalidMaps {
+                    model: model.to_string(),
+                    reason: format!("map '{name}' contains NaN or infinite values"),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Cheap structural check (used on every render): every spec present with the right
+    /// channel count, no unknown maps, equal B/H/W.
+    pub fn validate_shapes(&self, model: &str, specs: &[ParamSpec]) -> Result<()> {
+        let bad = |reason: String| Error::InvalidMaps {
+            model: model.to_string(),
+            reason,
+        };
+        for spec in specs {
+            let map = self.maps.get(spec.name).ok_or_else(|| {
+                bad(format!(
+                    "missing map '{}' (expected: {}; given: {})",
+                    spec.name,
+                    specs.iter().map(|s| s.name).collect::<Vec<_>>().join(", "),
+                    self.names().join(", ")
+                ))
+            })?;
+            let c = map.dims().get(1).copied().unwrap_or(0);
+            if map.rank() != 4 || c != spec.channels {
+                return Err(bad(format!(
+                    "map '{}' must have shape (B, {}, H, W), got {:?}",
+                    spec.name,
+                    spec.channels,
+                    map.dims()
+                )));
+            }
+        }
+        if let Some(extra) = self
+            .names()
+            .into_iter()
+            .find(|n| !specs.iter().any(|s| s.name == *n))
+        {
+            return Err(bad(format!(
+                "unexpected map '{extra}' (the model takes: {})",
+                specs.iter().map(|s| s.name).collect::<Vec<_>>().join(", ")
+            )));
+        }
+        self.batch_and_size().map_err(|e| bad(e.to_string()))?;
+        Ok(())
+    }
+}
