@@ -1,0 +1,118 @@
+//! Registry guard and lookup errors: the built-in plugins are linked into test binaries
+//! (DESIGN §3's linking pitfall), names are unique and sorted, and bad names or
+//! specifications fail with messages a user can act on.
+
+use photomat_core::registry::sorted_unique;
+use photomat_core::{BrdfArgs, BrdfRegistration, Error, Result, lookup, registered_names};
+use photomat_tests::{EXPECTED_BUILTINS, model};
+
+#[test]
+fn registry_lists_exactly_the_builtins_sorted() {
+    assert_eq!(registered_names().unwrap(), EXPECTED_BUILTINS);
+    assert_eq!(photomat_tests::brdfs::BUILTIN_NAMES, EXPECTED_BUILTINS);
+}
+
+#[test]
+fn registry_unknown_name_lists_known_names() {
+    let err = lookup("gxx")
+        .err()
+        .expect("unknown name must fail")
+        .to_string();
+    assert!(err.contains("'gxx'"), "{err}");
+    assert!(err.contains("coated, ggx, height, lambert"), "{err}");
+    // Unknown names nested inside an adapter are reported the same way.
+    let err = lookup("height(blinn)").err().unwrap().to_string();
+    assert!(
+        err.contains("'blinn'") && err.contains("coated, ggx, height, lambert"),
+        "{err}"
+    );
+}
+
+fn never_built(_: &BrdfArgs) -> Result<photomat_core::Brdf> {
+    unreachable!("only the duplicate check runs")
+}
+
+const fn registration(name: &'static str) -> BrdfRegistration {
+    BrdfRegistration {
+        name,
+        summary: "",
+        params: &[],
+        replaces: &[],
+        takes_nested: false,
+        args: &[],
+        construct: never_built,
+    }
+}
+
+#[test]
+fn registry_duplicate_names_are_an_error() {
+    static A: BrdfRegistration = registration("ggx");
+    static B: BrdfRegistration = registration("lambert");
+    static C: BrdfRegistration = registration("ggx");
+    let err = sorted_unique(vec![&A, &B, &C])
+        .err()
+        .expect("duplicates must fail");
+    assert!(
+        matches!(&err, Error::DuplicateBrdf(n) if n == "ggx"),
+        "{err}"
+    );
+    let ok = sorted_unique(vec![&B, &A]).unwrap();
+    assert_eq!(
+        ok.iter().map(|r| r.name).collect::<Vec<_>>(),
+        ["ggx", "lambert"]
+    );
+}
+
+#[test]
+fn registry_channel_counts_follow_the_param_specs() {
+    for (spec, n) in [
+        ("lambert", 6),
+        ("ggx", 10),
+        ("coated", 11),
+        ("height(ggx)", 8),
+        ("height(lambert)", 4),
+    ] {
+        assert_eq!(model(spec).channels(), n, "{spec}");
+    }
+    let names: Vec<_> = model("height(ggx)")
+        .params()
+        .iter()
+        .map(|p| p.name)
+        .collect();
+    assert_eq!(names, ["diffuse", "specular", "roughness", "height"]);
+}
+
+#[test]
+fn registry_canonical_names_round_trip() {
+    for spec in [
+        "ggx",
+        "height(ggx)",
+        "height( ggx , scale = 0.1 )",
+        "height(lambert, scale=0.5)",
+    ] {
+        let canonical = model(spec).name();
+        assert_eq!(model(&canonical).name(), canonical, "{spec}");
+    }
+    assert_eq!(model("height(ggx)").name(), "height(ggx, scale=0.02)");
+}
+
+#[test]
+fn registry_bad_specifications_explain_themselves() {
+    let cases = [
+        ("height", "wraps exactly one nested model"),
+        ("ggx(lambert)", "takes no nested model"),
+        ("height(ggx, depth=2)", "no argument 'depth' (valid: scale)"),
+        ("ggx(scale=1)", "no argument 'scale' (valid: none)"),
+        ("height(ggx, scale=5)", "outside [0, 1]"),
+        ("height(coated)", "has no 'normal' map to replace"),
+        ("height(height(ggx))", "has no 'normal' map to replace"),
+        ("height(ggx", "expected ',' or ')'"),
+    ];
+    for (spec, needle) in cases {
+        let err = lookup(spec)
+            .err()
+            .unwrap_or_else(|| panic!("{spec} must fail"))
+            .to_string();
+        assert!(err.contains(needle), "{spec}: {err}");
+    }
+}
