@@ -1,1 +1,88 @@
+//! # photomat-estimator
+//!
+//! The map estimator E of PhotoMat (Zhou et al., SIGGRAPH 2023): §3 "Material map estimator"
+//! trains a network that turns the generator's neural material F (32 feature channels per
+//! texel) into the parameter maps of an analytic BRDF, so that rendering those maps matches
+//! the neural relighting of F; §4 "Implementation" fixes it as a UNet with five down- and
+//! five up-sampling levels, 32→32→64→128→256→256→256→128→64→32→n.
+//!
+//! Here the BRDF is any registered plugin (DESIGN §3–4): n is the plugin's channel count, E
+//! outputs unconstrained raw values and the plugin's `decode` maps them into physical
+//! ranges (applying the reference's tanh head exactly once, see [`unet`]).
+//!
+//! - [`Estimator`] / [`EstimatorConfig`]: the UNet ([`unet`]).
+//! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]).
+//! - [`circular_pad`]: wrap-around padding by `narrow` + `cat` ([`mod@circular_pad`]).
+//! - [`upsample2x_periodic`]: ×2 bilinear upsampling with a periodic boundary as two
+//!   interpolation-matrix products ([`upsample`]).
+//!
+//! Every layer wraps around the image borders, so E commutes with rolls by multiples of 32
+//! texels and maps periodic (tileable) features to periodic maps.
+//!
+//! One deliberate deviation from the reference code: its upsampling uses
+//! `align_corners=True`, which is not shift equivariant; here it is `align_corners=False`
+//! with wrap-around (documented in [`upsample`]).
+//!
+//! ```no_run
+//! use candle_core::{DType, Device, Tensor};
+//! use candle_nn::{VarBuilder, VarMap};
+//! use photomat_brdfs as _; // link the built-in plugins
+//! use photomat_estimator::Estimator;
+//!
+//! # fn main() -> Result<(), Box<dyn std::error::Error>> {
+//! let brdf = photomat_core::lookup("height(ggx)")?;
+//! let vars = VarMap::new();
+//! let e = Estimator::for_brdf(brdf.as_ref(), VarBuilder::from_varmap(&vars, DType::F32, &Device::Cpu))?;
+//! let features = Tensor::randn(0f32, 1., (1, 32, 256, 256), &Device::Cpu)?;
+//! let maps = e.estimate(&features, brdf.as_ref())?; // diffuse, specular, roughness, height
+//! # Ok(()) }
+//! ```
 
+pub mod circular_pad;
+pub mod conv;
+pub mod unet;
+pub mod upsample;
+
+pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
+pub use conv::{CircularConv2d, circular_conv2d};
+pub use unet::{Estimator, EstimatorConfig};
+pub use upsample::{periodic_upsample_matrix, upsample2x_periodic};
+
+/// Deterministic test inputs shared by the unit tests.
+#[cfg(test)]
+pub(crate) mod test_util {
+    use candle_core::{DType, Device, Result, Shape, Tensor};
+
+    /// Values uniform in [−1, 1) from a SplitMix64 stream seeded by `seed` (candle's CPU
+    /// generator cannot be seeded).
+    pub fn pseudo_random(
+        shape: impl Into<Shape>,
+        seed: u64,
+        dtype: DType,
+        device: &Device,
+    ) -> Result<Tensor> {
+        let shape = shape.into();
+        let mut state = seed;
+        let values: Vec<f64> = (0..shape.elem_count())
+            .map(|_| {
+                state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+                let mut z = state;
+                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+                z ^= z >> 31;
+                (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+            })
+            .collect();
+        Tensor::from_vec(values, shape, device)?.to_dtype(dtype)
+    }
+
+    /// max |a − b| over all elements, as f64.
+    pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> Result<f64> {
+        (a - b)?
+            .abs()?
+            .flatten_all()?
+            .max(0)?
+            .to_dtype(DType::F64)?
+            .to_scalar::<f64>()
+    }
+}

@@ -1,0 +1,206 @@
+//! Convolution with circular padding: the reference's `CircularConv2d`.
+//!
+//! PhotoMat's estimator (paper §4 "Implementation"; reference `training/networks.py`,
+//! `CircularConv2d`) pads every convolution's input by wrapping around
+//! ([`crate::circular_pad`]) and then convolves without padding. Here the convolution is
+//! candle-nn's [`Conv2d`] with `padding = 0`, whose forward and backward passes are exact in
+//! candle 0.11 (DESIGN §6).
+//!
+//! Each layer keeps the size up to its stride ("same" convolution on the torus): a `k × k`
+//! kernel with stride `s` is padded by `(k − s)/2` on every side, so (H, W) → (H/s, W/s).
+//! Output texel `(i, j)` then reads input rows `s·i − (k − s)/2 …` and commutes with rolls by
+//! multiples of `s`: `conv(roll(x, s·t)) = roll(conv(x), t)`.
+//!
+//! Initialisation follows the reference's `weights_init`: Xavier-normal weights
+//! (σ = √(2 / ((C_in + C_out)·k²))) and biases drawn from N(0, 0.02²).
+
+use candle_core::{Result, Tensor, bail};
+use candle_nn::{Conv2d, Conv2dConfig, Init, Module, VarBuilder};
+
+use crate::circular_pad::circular_pad;
+
+/// Standard deviation of the initial biases (the reference's `bias.data.normal_(0, 0.02)`).
+const BIAS_INIT_STD: f64 = 0.02;
+
+/// A `k × k` convolution with stride `s` on a periodic image.
+#[derive(Debug, Clone)]
+pub struct CircularConv2d {
+    conv: Conv2d,
+    pad: usize,
+    stride: usize,
+}
+
+/// Builds a [`CircularConv2d`] with parameters `weight` (C_out, C_in, k, k) and `bias`
+/// (C_out) under `vb`.
+///
+/// `kernel − stride` must be even and ≥ 0 so that the padding is symmetric and the layer maps
+/// (H, W) to exactly (H/stride, W/stride).
+pub fn circular_conv2d(
+    in_channels: usize,
+    out_channels: usize,
+    kernel: usize,
+    stride: usize,
+    vb: VarBuilder,
+) -> Result<CircularConv2d> {
+    if stride == 0 || kernel < stride || (kernel - stride) % 2 != 0 {
+        bail!(
+            "circular conv: kernel {kernel} with stride {stride} cannot keep the size \
+             (need kernel ≥ stride ≥ 1 and kernel − stride even)"
+        );
+    }
+    let fan = ((in_channels + out_channels) * kernel * kernel) as f64;
+    let weight = vb.get_with_hints(
+        (out_channels, in_channels, kernel, kernel),
+        "weight",
+        Init::Randn {
+            mean: 0.0,
+            stdev: (2.0 / fan).sqrt(),
+        },
+    )?;
+    let bias = vb.get_with_hints(
+        out_channels,
+        "bias",
+        Init::Randn {
+            mean: 0.0,
+            stdev: BIAS_INIT_STD,
+        },
+    )?;
+    let cfg = Conv2dConfig {
+        padding: 0,
+        stride,
+        ..Default::default()
+    };
+    Ok(CircularConv2d {
+        conv: Conv2d::new(weight, Some(bias), cfg),
+        pad: (kernel - stride) / 2,
+        stride,
+    })
+}
+
+impl CircularConv2d {
+    /// The wrapped candle-nn convolution (padding 0).
+    pub fn conv(&self) -> &Conv2d {
+        &self.conv
+    }
+
+    /// Circular padding applied on every side before the convolution.
+    pub fn pad(&self) -> usize {
+        self.pad
+    }
+}
+
+impl Module for CircularConv2d {
+    /// # Shapes
+    /// (B, C_in, H, W) → (B, C_out, H/s, W/s); H and W must be multiples of the stride s.
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let (_b, _c, h, w) = x.dims4()?;
+        if h % self.stride != 0 || w % self.stride != 0 {
+            bail!(
+                "circular conv with stride {}: input {h}×{w} is not a multiple of the stride",
+                self.stride
+            );
+        }
+        self.conv.forward(&circular_pad(x, self.pad)?)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{DType, Device};
+    use candle_nn::VarMap;
+
+    use super::*;
+    use crate::test_util::{max_abs_diff, pseudo_random};
+
+    /// A layer with fresh random weights (f64 so that comparisons are tight).
+    fn layer(c_in: usize, c_out: usize, k: usize, s: usize) -> Result<CircularConv2d> {
+        let vm = VarMap::new();
+        circular_conv2d(
+            c_in,
+            c_out,
+            k,
+            s,
+            VarBuilder::from_varmap(&vm, DType::F64, &Device::Cpu),
+        )
+    }
+
+    /// Reference: convolve the 3 × 3 tiling of `x` without padding and crop the window that
+    /// corresponds to the centre tile. Independent of `circular_pad`.
+    fn tiled_reference(layer: &CircularConv2d, x: &Tensor) -> Result<Tensor> {
+        let (_, _, h, w) = x.dims4()?;
+        let row = Tensor::cat(&[x, x, x], 3)?;
+        let tiled = Tensor::cat(&[&row, &row, &row], 2)?;
+        let p = layer.pad();
+        let s = layer.conv().config().stride;
+        let window = tiled
+            .narrow(2, h - p, h + 2 * p)?
+            .narrow(3, w - p, w + 2 * p)?;
+        let y = window.conv2d(layer.conv().weight(), 0, s, 1, 1)?;
+        let bias = layer.conv().bias().expect("layer has a bias");
+        y.broadcast_add(&bias.reshape((1, (), 1, 1))?)
+    }
+
+    #[test]
+    fn circular_conv_equals_conv_of_the_tiled_input() -> Result<()> {
+        for (k, s) in [(3, 1), (4, 2)] {
+            let conv = layer(3, 5, k, s)?;
+            let x = pseudo_random((2, 3, 8, 12), 1, DType::F64, &Device::Cpu)?;
+            let y = conv.forward(&x)?;
+            assert_eq!(y.dims4()?, (2, 5, 8 / s, 12 / s));
+            // Same products summed in the same order on identical windows: rounding-level
+            // differences at most (f64, ≤ 48-term dot products).
+            assert!(max_abs_diff(&y, &tiled_reference(&conv, &x)?)? < 1e-12);
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn circular_conv_commutes_with_roll_by_stride_multiples() -> Result<()> {
+        let conv = layer(2, 4, 4, 2)?;
+        let x = pseudo_random((1, 2, 8, 8), 2, DType::F64, &Device::Cpu)?;
+        let a = conv.forward(&x.roll(4, 2)?.roll(-2, 3)?)?;
+        let b = conv.forward(&x)?.roll(2, 2)?.roll(-1, 3)?;
+        assert!(max_abs_diff(&a, &b)? < 1e-12);
+        Ok(())
+    }
+
+    #[test]
+    fn circular_conv_keeps_periodic_input_periodic_where_zero_padding_does_not() -> Result<()> {
+        // A 2 × 2 tiling of one 4 × 4 tile is periodic with period 4. Circular padding keeps
+        // the output periodic; the same weights with zero padding see a black border and
+        // break the period (the control that makes this test meaningful).
+        let conv = layer(2, 3, 3, 1)?;
+        let tile = pseudo_random((1, 2, 4, 4), 3, DType::F64, &Device::Cpu)?;
+        let row = Tensor::cat(&[&tile, &tile], 3)?;
+        let x = Tensor::cat(&[&row, &row], 2)?;
+        let period_error = |y: &Tensor| -> Result<f64> {
+            Ok(max_abs_diff(y, &y.roll(4, 2)?)?.max(max_abs_diff(y, &y.roll(4, 3)?)?))
+        };
+        assert!(period_error(&conv.forward(&x)?)? < 1e-12);
+        let zero_padded = Conv2d::new(
+            conv.conv().weight().clone(),
+            conv.conv().bias().cloned(),
+            Conv2dConfig {
+                padding: 1,
+                ..Default::default()
+            },
+        );
+        // Border texels lose ≥ 3 of 9 taps of O(1) inputs with O(0.1) weights.
+        assert!(period_error(&zero_padded.forward(&x)?)? > 1e-3);
+        Ok(())
+    }
+
+    #[test]
+    fn circular_conv_rejects_sizes_it_cannot_keep() -> Result<()> {
+        let vm = VarMap::new();
+        let vb = VarBuilder::from_varmap(&vm, DType::F32, &Device::Cpu);
+        assert!(circular_conv2d(1, 1, 4, 1, vb.pp("a")).is_err()); // k − s = 3: odd
+        let conv = circular_conv2d(1, 1, 4, 2, vb.pp("b"))?;
+        let err = conv
+            .forward(&Tensor::zeros((1, 1, 6, 5), DType::F32, &Device::Cpu)?)
+            .expect_err("5 is odd")
+            .to_string();
+        assert!(err.contains("not a multiple of the stride"), "{err}");
+        Ok(())
+    }
+}
