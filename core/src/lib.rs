@@ -18,6 +18,7 @@ pub mod adapter;
 pub mod brdf;
 pub mod error;
 pub mod flash;
+pub mod image_io;
 pub mod lobes;
 pub mod map_files;
 pub mod maps;
