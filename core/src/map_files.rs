@@ -308,8 +308,9 @@ pub fn read_manifest(path: &Path) -> Result<MapManifest> {
             "written by a newer photomat (format version {v}; this build reads up to {FORMAT_VERSION})"
         )));
     }
-    let manifest: MapManifest = serde_json::from_value(value)
-        .map_err(|e| bad(format!("corrupt material manifest: {e}")))?;
+    // Parsed from the text again (not from `value`) so that errors carry line and column.
+    let manifest: MapManifest =
+        serde_json::from_str(&text).map_err(|e| bad(format!("corrupt material manifest: {e}")))?;
     if manifest.resolution == 0 {
         return Err(bad("field 'resolution' must be at least 1".into()));
     }
