@@ -1,1 +1,150 @@
+//! # photomat-cli
+//!
+//! The `photomat` command line as a library, so that users can build their own binary with
+//! extra BRDF plugins linked in: depend on `photomat-cli`, register plugins in the binary's
+//! crate with `photomat_core::register_brdf!`, and call [`run`] from `main`:
+//!
+//! ```ignore
+//! // my-photomat/src/main.rs
+//! mod my_brdf; // calls photomat_core::register_brdf!(…)
+//! fn main() -> std::process::ExitCode {
+//!     photomat_cli::run()
+//! }
+//! ```
+//!
+//! Commands (one file each under `commands/`):
+//! - `photomat brdfs [--json]`: the registered models with their parameter tables and `n`;
+//! - `photomat render --maps DIR (--light X,Y | --orbit N) [--brdf SPEC] --out FILE.png`;
+//! - `photomat brdf-eval --brdf SPEC --cases FILE.json [--grad] [--f64]`: values (and
+//!   Jacobians) of a model at given directions and parameters, as JSON on stdout.
 
+use std::ffi::OsString;
+use std::io::Write;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+// Link the built-in plugins: a crate that only lists them in Cargo.toml sees none (DESIGN §3).
+use photomat_brdfs as _;
+
+mod commands;
+
+/// Learn material generators from flash photos and decode them into analytic SVBRDF maps.
+#[derive(Debug, Parser)]
+#[command(name = "photomat", version, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// List the registered BRDF models: parameter tables and channel counts n.
+    Brdfs(commands::brdfs::Args),
+    /// Render a material folder under the collocated flash (one image or an orbit sheet).
+    Render(commands::render::Args),
+    /// Evaluate a model at given directions and parameters; JSON values and gradients.
+    BrdfEval(commands::brdf_eval::Args),
+}
+
+impl Command {
+    fn execute(&self, out: &mut dyn Write) -> anyhow::Result<()> {
+        match self {
+            Command::Brdfs(args) => commands::brdfs::run(args, out),
+            Command::Render(args) => commands::render::run(args, out),
+            Command::BrdfEval(args) => commands::brdf_eval::run(args, out),
+        }
+    }
+}
+
+/// Run the command line of this process: parse `std::env::args_os()`, execute, print errors
+/// as `error: …` followed by their causes to stderr. Exit codes: 0 success, 1 failure,
+/// 2 usage error.
+pub fn run() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            // Help and version requests are "errors" that print to stdout and exit 0.
+            let _ = e.print();
+            return ExitCode::from(e.exit_code().clamp(0, 255) as u8);
+        }
+    };
+    let stdout = std::io::stdout();
+    match cli.command.execute(&mut stdout.lock()) {
+        Ok(()) => ExitCode::SUCCESS,
+        // `photomat brdfs | head`: the reader has gone, nothing is left to report.
+        Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("{}", format_error(&e));
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn is_broken_pipe(error: &anyhow::Error) -> bool {
+    error.chain().any(|cause| {
+        cause
+            .downcast_ref::<std::io::Error>()
+            .is_some_and(|e| e.kind() == std::io::ErrorKind::BrokenPipe)
+    })
+}
+
+/// Parse `args` (the first item is the program name, as in `std::env::args`) and execute,
+/// writing the command's output to stdout. For tests and embedding; usage errors and `--help`
+/// come back as errors.
+pub fn run_with_args<I, T>(args: I) -> anyhow::Result<()>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let stdout = std::io::stdout();
+    run_with_output(args, &mut stdout.lock())
+}
+
+/// [`run_with_args`] writing the command's output (tables, JSON, status lines) to `out`.
+pub fn run_with_output<I, T>(args: I, out: &mut dyn Write) -> anyhow::Result<()>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    Cli::try_parse_from(args)?.command.execute(out)?;
+    out.flush()?;
+    Ok(())
+}
+
+/// `error: <message>` followed by one `  caused by: <cause>` line per underlying error.
+pub fn format_error(error: &anyhow::Error) -> String {
+    let mut text = format!("error: {error}");
+    for cause in error.chain().skip(1) {
+        text.push_str(&format!("\n  caused by: {cause}"));
+    }
+    text
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::CommandFactory;
+
+    #[test]
+    fn cli_definition_is_consistent() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn format_error_lists_the_cause_chain() {
+        let inner = anyhow::anyhow!("disk full");
+        let error = inner.context("cannot write out.png");
+        assert_eq!(
+            format_error(&error),
+            "error: cannot write out.png\n  caused by: disk full"
+        );
+    }
+
+    #[test]
+    fn usage_errors_come_back_as_errors() {
+        let mut out = Vec::new();
+        let err = run_with_output(["photomat", "render", "--maps", "x"], &mut out).unwrap_err();
+        assert!(err.to_string().contains("--out"), "{err}");
+    }
+}
