@@ -38,6 +38,8 @@ use candle_core::{DType, Device, Tensor, Var};
 use photomat_core::{Brdf, MaterialMaps, ParamSpec, lookup};
 use serde::{Deserialize, Serialize};
 
+use super::shortest;
+
 /// Shortest direction accepted before normalising: a zero vector has no direction, and 1e-12
 /// is far below any deliberately written component.
 const MIN_DIRECTION_LENGTH: f64 = 1e-12;
@@ -265,7 +267,7 @@ fn validate(case: &CaseIn, specs: &[ParamSpec]) -> anyhow::Result<Case> {
         .map(|spec| {
             let values = match case.params.get(spec.name) {
                 Some(v) => v.to_vec(),
-                None => spec.default.iter().map(|&v| v as f64).collect(),
+                None => spec.default.iter().copied().map(shortest).collect(),
             };
             if values.len() != spec.channels {
                 bail!(

@@ -10,6 +10,8 @@ use photomat_core::param::total_channels;
 use photomat_core::{BrdfRegistration, ColorSpace, Encoding, ParamSpec, lookup, registrations};
 use serde::Serialize;
 
+use super::shortest;
+
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Print machine-readable JSON instead of tables.
@@ -127,12 +129,6 @@ fn param_info(spec: &ParamSpec) -> ParamInfo {
         differentiable: spec.differentiable,
         doc: spec.doc,
     }
-}
-
-/// The f64 with the f32's shortest decimal form, so JSON shows 0.04 rather than
-/// 0.03999999910593033 (the f32 nearest to either is the same).
-fn shortest(v: f32) -> f64 {
-    v.to_string().parse().unwrap_or(v as f64)
 }
 
 fn encoding_name(encoding: Encoding) -> &'static str {
