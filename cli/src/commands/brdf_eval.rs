@@ -81,19 +81,43 @@ pub struct CaseIn {
 }
 
 /// A parameter value: a list of channel values, or a bare number for 1-channel maps.
-#[derive(Debug, Deserialize)]
-#[serde(untagged)]
-pub enum Values {
-    One(f64),
-    Many(Vec<f64>),
-}
+#[derive(Debug, Clone, PartialEq)]
+pub struct Values(pub Vec<f64>);
 
-impl Values {
-    fn to_vec(&self) -> Vec<f64> {
-        match self {
-            Values::One(v) => vec![*v],
-            Values::Many(v) => v.clone(),
+impl<'de> Deserialize<'de> for Values {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Visitor;
+        impl<'de> serde::de::Visitor<'de> for Visitor {
+            type Value = Values;
+
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a number or a list of numbers")
+            }
+
+            fn visit_f64<E>(self, v: f64) -> Result<Values, E> {
+                Ok(Values(vec![v]))
+            }
+
+            fn visit_i64<E>(self, v: i64) -> Result<Values, E> {
+                Ok(Values(vec![v as f64]))
+            }
+
+            fn visit_u64<E>(self, v: u64) -> Result<Values, E> {
+                Ok(Values(vec![v as f64]))
+            }
+
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(
+                self,
+                mut seq: A,
+            ) -> Result<Values, A::Error> {
+                let mut values = Vec::new();
+                while let Some(v) = seq.next_element::<f64>()? {
+                    values.push(v);
+                }
+                Ok(Values(values))
+            }
         }
+        deserializer.deserialize_any(Visitor)
     }
 }
 
@@ -130,13 +154,18 @@ struct Case {
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let brdf = lookup(&args.brdf).context("invalid --brdf")?;
     let text = read_cases_text(&args.cases)?;
-    let file: CasesFile = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not a valid cases file", args.cases.display()))?;
+    let source = if args.cases.as_os_str() == "-" {
+        "stdin".to_string()
+    } else {
+        args.cases.display().to_string()
+    };
+    let file: CasesFile =
+        serde_json::from_str(&text).with_context(|| format!("{source}: not a valid cases file"))?;
     let dtype = if args.double { DType::F64 } else { DType::F32 };
     let output = evaluate(&brdf, &file.cases, dtype, args.grad)
-        .with_context(|| format!("{}: cannot evaluate the cases", args.cases.display()))?;
-    serde_json::to_writer_pretty(&mut *out, &output)?;
-    writeln!(out)?;
+        .with_context(|| format!("{source}: cannot evaluate the cases"))?;
+    // Serialised first, so that write errors (a closed pipe) arrive as plain io errors.
+    writeln!(out, "{}", serde_json::to_string_pretty(&output)?)?;
     Ok(())
 }
 
@@ -266,7 +295,7 @@ fn validate(case: &CaseIn, specs: &[ParamSpec]) -> anyhow::Result<Case> {
         .iter()
         .map(|spec| {
             let values = match case.params.get(spec.name) {
-                Some(v) => v.to_vec(),
+                Some(v) => v.0.clone(),
                 None => spec.default.iter().copied().map(shortest).collect(),
             };
             if values.len() != spec.channels {

@@ -82,8 +82,9 @@ pub struct ExampleInfo {
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let models = list_models()?;
     if args.json {
-        serde_json::to_writer_pretty(&mut *out, &Listing { models: &models })?;
-        writeln!(out)?;
+        // Serialised first, so that write errors (a closed pipe) arrive as plain io errors.
+        let json = serde_json::to_string_pretty(&Listing { models: &models })?;
+        writeln!(out, "{json}")?;
     } else {
         write!(out, "{}", format_text(&models))?;
     }
