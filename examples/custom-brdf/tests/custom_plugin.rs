@@ -8,8 +8,13 @@
 use photomat_brdfs as _;
 use photomat_custom_brdf_example as _;
 
+use std::path::Path;
+use std::process::{Command, Output};
+
 use candle_core::{DType, Device, Tensor, Var};
 use photomat_core::flash::texel_center;
+use photomat_core::image_io::{PlanarImage, read_png};
+use photomat_core::map_files::{SaveOptions, load_maps, save_maps};
 use photomat_core::{Brdf, Highlight, MaterialMaps, lookup, registered_names, render};
 
 /// Every model a binary linking the built-ins and this crate sees, sorted.
@@ -496,4 +501,107 @@ fn height_blinn_phong_render_gradients_match_finite_differences() {
         Highlight::new(-0.1, 0.2),
         42,
     );
+}
+
+/// Run the user's binary (built by cargo for this package's tests) with `args`.
+fn photomat_custom(args: &[&str]) -> Output {
+    let output = Command::new(env!("CARGO_BIN_EXE_photomat-custom"))
+        .args(args)
+        .output()
+        .expect("the photomat-custom binary runs");
+    assert!(
+        output.status.success(),
+        "photomat-custom {args:?} failed: {}\n{}",
+        output.status,
+        String::from_utf8_lossy(&output.stderr)
+    );
+    output
+}
+
+#[test]
+fn photomat_custom_brdfs_lists_blinn_phong() {
+    let text = String::from_utf8(photomat_custom(&["brdfs"]).stdout).unwrap();
+    assert!(text.contains("blinn_phong"), "{text}");
+    assert!(text.contains("glossiness"), "{text}");
+
+    // The binary's registry holds exactly the built-ins plus the user's model, with n = 10.
+    let json: serde_json::Value =
+        serde_json::from_slice(&photomat_custom(&["brdfs", "--json"]).stdout).unwrap();
+    let models = json["models"].as_array().expect("a list of models");
+    let names: Vec<_> = models.iter().map(|m| m["name"].as_str().unwrap()).collect();
+    assert_eq!(names, EXPECTED_NAMES);
+    let blinn = models.iter().find(|m| m["name"] == "blinn_phong").unwrap();
+    assert_eq!(blinn["channels"], 10, "{blinn}");
+}
+
+#[test]
+fn photomat_custom_renders_saved_blinn_phong_maps() {
+    // Maps saved through the folder API, as a user's estimator would write them.
+    let brdf = model("blinn_phong");
+    let size = 32;
+    // A flat plane with a faint diffuse texture and a uniform narrow lobe (e = 2^8.2), so
+    // the brightest pixel is the one under the flash and the peak (≈ 0.8) is not clipped.
+    let mut rng = Rng(53);
+    let texture: Vec<Vec<f64>> = (0..size * size)
+        .map(|_| (0..3).map(|_| rng.uniform(0.03, 0.05)).collect())
+        .collect();
+    let uniform = |v: Vec<f64>| grid(&vec![v; size * size], size);
+    let maps = MaterialMaps::new()
+        .with("diffuse", grid(&texture, size))
+        .with("specular", uniform(vec![0.02; 3]))
+        .with("glossiness", uniform(vec![0.6]))
+        .with("normal", uniform(vec![0.0, 0.0, 1.0]))
+        .map_tensors(|t| Ok(t.to_dtype(DType::F32)?))
+        .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let folder = dir.path().join("material");
+    save_maps(&folder, brdf.as_ref(), &maps, &SaveOptions::default()).unwrap();
+
+    let out = dir.path().join("render.png");
+    let args = [
+        "render",
+        "--maps",
+        path_str(&folder),
+        "--light",
+        "0.1,0.1",
+        "--out",
+    ];
+    let stdout = photomat_custom(&[&args[..], &[path_str(&out)]].concat()).stdout;
+    assert!(String::from_utf8_lossy(&stdout).contains("blinn_phong"));
+
+    // The PNG is the library render of the loaded material, up to 8-bit quantisation.
+    let (png, _) = read_png(&out).unwrap();
+    assert_eq!((png.channels, png.height, png.width), (3, size, size));
+    let loaded = load_maps(&folder, None).unwrap();
+    assert_eq!(loaded.brdf.name(), "blinn_phong");
+    let expected = render(
+        loaded.brdf.as_ref(),
+        &loaded.maps,
+        &[Highlight::new(0.1, 0.1)],
+    )
+    .unwrap();
+    let expected = PlanarImage::from_tensor(&expected).unwrap();
+    let worst = png
+        .data
+        .iter()
+        .zip(&expected.data)
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(
+        worst <= 0.5 / 255.0 + 1e-6,
+        "PNG differs from the render by {worst}"
+    );
+
+    // And the highlight sits under the flash: (0.1, 0.1) is pixel (row 12.8, col 19.2).
+    let lum: Vec<f32> = (0..size * size)
+        .map(|p| (0..3).map(|c| png.data[c * size * size + p]).sum::<f32>())
+        .collect();
+    let argmax = (0..lum.len())
+        .max_by(|&a, &b| lum[a].total_cmp(&lum[b]))
+        .unwrap();
+    assert_eq!((argmax / size, argmax % size), (12, 19));
+}
+
+fn path_str(path: &Path) -> &str {
+    path.to_str().expect("temporary paths are UTF-8")
 }
