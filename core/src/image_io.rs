@@ -285,12 +285,12 @@ pub fn read_png(path: &Path) -> Result<(PlanarImage, PngBits)> {
 
 /// A PNG's (channels, height, width) from its header only (no pixel decoding).
 pub fn png_header(path: &Path) -> Result<(usize, usize, usize)> {
-    let fail = |e: &dyn std::fmt::Display| Error::file(path, format!("not a readable PNG: {e}"));
-    let reader =
+    let mut reader =
         ImageReader::open(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
-    let mut reader = reader;
     reader.set_format(ImageFormat::Png);
-    let decoder = reader.into_decoder().map_err(|e| fail(&e))?;
+    let decoder = reader
+        .into_decoder()
+        .map_err(|e| Error::file(path, format!("not a readable PNG: {e}")))?;
     let (width, height) = decoder.dimensions();
     let (channels, _) = png_channels(decoder.color_type()).map_err(|e| Error::file(path, e))?;
     Ok((channels, height as usize, width as usize))

@@ -118,6 +118,7 @@ pub struct MapEntry {
 }
 
 /// A material read from a folder.
+#[derive(Clone)]
 pub struct LoadedMaterial {
     /// The model the maps were validated against (the override, or `lookup(manifest.brdf)`).
     pub brdf: Brdf,

@@ -44,13 +44,24 @@ use super::shortest;
 /// is far below any deliberately written component.
 const MIN_DIRECTION_LENGTH: f64 = 1e-12;
 
+/// Printed after `photomat brdf-eval --help`.
+const CASES_HELP: &str = "\
+Cases file (JSON):
+  {\"cases\": [{\"wi\": [0, 0, 1], \"wo\": [0.6, 0, 0.8],
+              \"params\": {\"diffuse\": [0.5, 0.5, 0.5], \"roughness\": 0.3}}]}
+wi, wo: directions in the material's frame (z up), normalised before use.
+params: per map of the model (see `photomat brdfs`); missing maps take the spec default.
+Output per case: params used, value = f·cos θo (rgb), f (null where cos θo ≤ 0 w.r.t. the
+case's shading normal) and, with --grad, grad[param][out_channel][param_channel].";
+
 #[derive(Debug, clap::Args)]
+#[command(after_help = CASES_HELP)]
 pub struct Args {
     /// Model specification, e.g. ggx or height(ggx, scale=0.05).
     #[arg(long, value_name = "SPEC")]
     pub brdf: String,
 
-    /// JSON file of cases ('-' reads stdin); see the module docs / README for the schema.
+    /// JSON file of cases ('-' reads stdin); schema below.
     #[arg(long, value_name = "FILE.json")]
     pub cases: PathBuf,
 
