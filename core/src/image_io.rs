@@ -10,7 +10,7 @@
 //! | 1        | grey      | `Y`                          |
 //! | 3        | RGB       | `R`, `G`, `B`                |
 //! | 4        | RGBA      | `R`, `G`, `B`, `A`           |
-//! | other    | –         | `C0`, `C1`, … (zero-padded)  |
+//! | other    | –         | `C00`, `C01`, …              |
 //!
 //! Every writer goes through [`write_atomic`]: the bytes land in a temporary file in the
 //! destination's folder and are renamed over the destination, so a reader never sees a
