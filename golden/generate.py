@@ -56,10 +56,12 @@ STRICT_NOISE = 5e-6
 # (the relative error of D grows like u/α near its peak) and far above principled's α floor.
 RANDOM_ROUGHNESS_MIN = 0.15
 
-# Tolerances of `check` (regenerated vs committed references; README "Drift check").
-DRIFT_REL = 2e-6  # values, strict cases, relative
-DRIFT_GRAD = 2e-6  # gradients, strict cases, relative to the per-case gradient-row norm
-DRIFT_ILL = 1e-3  # ill-conditioned cases, values and gradients, same scales
+# Tolerances of `check` (regenerated vs committed references; README "Drift check"). The LLVM
+# backend may round differently on another CPU, by about a case's measured float32 noise.
+DRIFT_REL = 2e-6  # floor: values relative, gradients relative to the per-case gradient-row norm
+DRIFT_NOISE_FACTOR = 2.0  # per case: max(DRIFT_REL, factor × the case's noise)
+DRIFT_NORMAL = 1e-6  # bumpmap normals, absolute; their height gradients relative to the max
+DRIFT_RENDER = 5e-6  # render radiance, relative
 # Composed model vs Mitsuba's plugins (asserted while generating and checking).
 CROSS_REL = 4e-6
 
@@ -972,11 +974,12 @@ def check_brdf(model, drift):
         where = f"{model}.json case {i} ({old['tag']})"
         if old["class"] != new["class"]:
             drift.failures.append(f"{where}: class {old['class']} → {new['class']}")
-        strict = old["class"] == "strict"
+        value_tol = max(DRIFT_REL, DRIFT_NOISE_FACTOR * old["value_noise"])
+        grad_tol = max(DRIFT_REL, DRIFT_NOISE_FACTOR * old["grad_noise"])
         for key in ("f_cos", "f"):
             for k in range(3):
                 o, n = old[key][k], new[key][k]
-                drift.close(f"{where} {key}[{k}]", n, o, max(abs(o or 0.0), 1e-30), DRIFT_REL if strict else DRIFT_ILL)
+                drift.close(f"{where} {key}[{k}]", n, o, max(abs(o or 0.0), 1e-30), value_tol)
         if (old["grad"] is None) != (new["grad"] is None):
             drift.failures.append(f"{where}: gradients finite changed")
             continue
@@ -991,7 +994,7 @@ def check_brdf(model, drift):
                         new["grad"][name][k][j],
                         g[k][j],
                         max(row, 1e-30),
-                        DRIFT_GRAD if strict else DRIFT_ILL,
+                        grad_tol,
                     )
 
 
@@ -1013,10 +1016,10 @@ def check_height(drift):
     for old, new in zip(committed["cases"], fresh["cases"]):
         for k in range(3):
             for t, (o, n) in enumerate(zip(old["normal"][k], new["normal"][k])):
-                drift.close(f"height.json {old['tag']} normal[{k}][{t}]", n, o, 1.0, DRIFT_REL)
+                drift.close(f"height.json {old['tag']} normal[{k}][{t}]", n, o, 1.0, DRIFT_NORMAL)
         gmax = max(abs(g) for g in old["grad_height"]) or 1.0
         for t, (o, n) in enumerate(zip(old["grad_height"], new["grad_height"])):
-            drift.close(f"height.json {old['tag']} grad_height[{t}]", n, o, gmax, DRIFT_GRAD)
+            drift.close(f"height.json {old['tag']} grad_height[{t}]", n, o, gmax, DRIFT_REL)
 
 
 def check_render(stem, drift):
@@ -1025,7 +1028,7 @@ def check_render(stem, drift):
     fresh = render_reference(committed["model"], committed["size"], tuple(committed["highlight"]), maps)
     for k in range(3):
         for t, (o, n) in enumerate(zip(committed["radiance"][k], fresh[k])):
-            drift.close(f"{stem}.json radiance[{k}][{t}]", n, o, max(abs(o), 1e-30), DRIFT_REL)
+            drift.close(f"{stem}.json radiance[{k}][{t}]", n, o, max(abs(o), 1e-30), DRIFT_RENDER)
 
 
 def main():
