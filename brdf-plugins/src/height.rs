@@ -56,7 +56,7 @@ impl HeightToNormal {
         let nx = (gx * -self.scale)?;
         let ny = (gy * -self.scale)?;
         let nz = nx.ones_like()?;
-        Ok(normalize3(&Tensor::cat(&[nx, ny, nz], 1)?)?)
+        normalize3(&Tensor::cat(&[nx, ny, nz], 1)?)
     }
 }
 
@@ -78,7 +78,12 @@ fn construct(args: &BrdfArgs) -> Result<Brdf> {
     let adapter = HeightToNormal {
         scale: args.value("scale")?,
     };
-    Ok(Arc::new(AdaptedBrdf::new(args, ADDS, &["normal"], adapter)?))
+    Ok(Arc::new(AdaptedBrdf::new(
+        args,
+        ADDS,
+        &["normal"],
+        adapter,
+    )?))
 }
 
 register_brdf!(BrdfRegistration {

@@ -13,6 +13,7 @@
 //! ```
 //!
 //! Commands (one file each under `commands/`):
+//! - `photomat demo [--out DIR]`: a procedural material's maps, render, orbit and map sheets;
 //! - `photomat brdfs [--json]`: the registered models with their parameter tables and `n`;
 //! - `photomat render --maps DIR (--light X,Y | --orbit N) [--brdf SPEC] --out FILE.png`;
 //! - `photomat brdf-eval --brdf SPEC --cases FILE.json [--grad] [--f64]`: values (and
@@ -39,6 +40,8 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// Generate a procedural material and show it: maps, a render and an orbit sheet.
+    Demo(commands::demo::Args),
     /// List the registered BRDF models: parameter tables and channel counts n.
     Brdfs(commands::brdfs::Args),
     /// Render a material folder under the collocated flash (one image or an orbit sheet).
@@ -50,6 +53,7 @@ enum Command {
 impl Command {
     fn execute(&self, out: &mut dyn Write) -> anyhow::Result<()> {
         match self {
+            Command::Demo(args) => commands::demo::run(args, out),
             Command::Brdfs(args) => commands::brdfs::run(args, out),
             Command::Render(args) => commands::render::run(args, out),
             Command::BrdfEval(args) => commands::brdf_eval::run(args, out),

@@ -53,7 +53,10 @@ pub trait DifferentiableBrdf: Send + Sync {
         let mut maps = MaterialMaps::new();
         let mut offset = 0;
         for spec in self.params() {
-            maps.insert(spec.name, spec.decode(&raw.narrow(1, offset, spec.channels)?)?);
+            maps.insert(
+                spec.name,
+                spec.decode(&raw.narrow(1, offset, spec.channels)?)?,
+            );
             offset += spec.channels;
         }
         Ok(maps)

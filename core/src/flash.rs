@@ -74,14 +74,25 @@ pub struct FlashGeometry {
 
 impl FlashGeometry {
     /// Geometry for `highlights.len()` flash positions over an R×R plane.
-    pub fn new(highlights: &[Highlight], size: usize, dtype: DType, device: &Device) -> Result<Self> {
+    pub fn new(
+        highlights: &[Highlight],
+        size: usize,
+        dtype: DType,
+        device: &Device,
+    ) -> Result<Self> {
         if highlights.is_empty() || size == 0 {
             return Err(Error::Invalid(
                 "flash geometry needs at least one highlight and a non-empty map".into(),
             ));
         }
-        if let Some(h) = highlights.iter().find(|h| !(h.x.is_finite() && h.y.is_finite())) {
-            return Err(Error::Invalid(format!("highlight ({}, {}) is not finite", h.x, h.y)));
+        if let Some(h) = highlights
+            .iter()
+            .find(|h| !(h.x.is_finite() && h.y.is_finite()))
+        {
+            return Err(Error::Invalid(format!(
+                "highlight ({}, {}) is not finite",
+                h.x, h.y
+            )));
         }
         let plane = size * size;
         let mut omega = vec![0f64; highlights.len() * 3 * plane];

@@ -10,9 +10,9 @@ use std::f64::consts::PI;
 
 use candle_core::Tensor;
 
+use crate::Result;
 use crate::microfacet::{alpha_from_roughness, ggx_d, schlick, smith_g};
 use crate::shading::ShadingGeometry;
-use crate::Result;
 
 /// Lambert: `ρ/π · cos θ_o`.
 pub fn lambert(geometry: &ShadingGeometry, albedo: &Tensor) -> Result<Tensor> {

@@ -88,7 +88,9 @@ impl Parser<'_> {
         let len = rest
             .char_indices()
             .find(|&(i, c)| {
-                !(c.is_ascii_alphabetic() || c == '_' || (i > 0 && (c.is_ascii_digit() || c == '-')))
+                !(c.is_ascii_alphabetic()
+                    || c == '_'
+                    || (i > 0 && (c.is_ascii_digit() || c == '-')))
             })
             .map_or(rest.len(), |(i, _)| i);
         if len == 0 {
@@ -170,7 +172,16 @@ mod tests {
 
     #[test]
     fn plugin_spec_rejects_malformed_text() {
-        for text in ["", "height(", "height(ggx", "ggx)", "(ggx)", "h(s=)", "h(s=1, s=2)", "1ggx"] {
+        for text in [
+            "",
+            "height(",
+            "height(ggx",
+            "ggx)",
+            "(ggx)",
+            "h(s=)",
+            "h(s=1, s=2)",
+            "1ggx",
+        ] {
             let err = PluginSpec::parse(text).unwrap_err().to_string();
             assert!(err.contains("invalid BRDF specification"), "{text}: {err}");
         }

@@ -8,11 +8,11 @@
 //! Linking pitfall: a crate that depends on a plugin crate but never names it in code sees
 //! none of its plugins. Binaries and tests that use plugins write `use photomat_brdfs as _;`.
 
-use std::collections::BTreeMap;
 use crate::brdf::Brdf;
 use crate::param::ParamSpec;
 use crate::plugin_spec::PluginSpec;
 use crate::{Error, Result};
+use std::collections::BTreeMap;
 
 /// A scalar construction argument of a model (Mitsuba's plugin properties), e.g. `scale`.
 /// Arguments are not maps: they are fixed per model instance and never differentiated.
@@ -66,9 +66,10 @@ impl BrdfArgs {
 
     /// A scalar argument's value (given or default).
     pub fn value(&self, name: &str) -> Result<f64> {
-        self.values.get(name).copied().ok_or_else(|| {
-            Error::Invalid(format!("'{}' has no argument '{name}'", self.canonical))
-        })
+        self.values
+            .get(name)
+            .copied()
+            .ok_or_else(|| Error::Invalid(format!("'{}' has no argument '{name}'", self.canonical)))
     }
 }
 
@@ -142,7 +143,11 @@ fn build(spec: &PluginSpec, full_text: &str) -> Result<Brdf> {
             bad(format!(
                 "'{}' has no argument '{key}' (valid: {})",
                 reg.name,
-                if valid.is_empty() { "none".to_string() } else { valid.join(", ") }
+                if valid.is_empty() {
+                    "none".to_string()
+                } else {
+                    valid.join(", ")
+                }
             ))
         })?;
         if !(arg.range.0..=arg.range.1).contains(value) {
@@ -162,7 +167,11 @@ fn build(spec: &PluginSpec, full_text: &str) -> Result<Brdf> {
             .iter()
             .map(|n| PluginSpec::parse(&n.name()))
             .collect::<Result<_>>()?,
-        values: reg.args.iter().map(|a| (a.name.to_string(), values[a.name])).collect(),
+        values: reg
+            .args
+            .iter()
+            .map(|a| (a.name.to_string(), values[a.name]))
+            .collect(),
     }
     .to_string();
     let args = BrdfArgs {

@@ -46,7 +46,11 @@ pub fn render_radiance(
             highlights.len()
         )));
     }
-    let first = maps.iter().next().map(|(_, t)| t).expect("validated non-empty");
+    let first = maps
+        .iter()
+        .next()
+        .map(|(_, t)| t)
+        .expect("validated non-empty");
     let geometry = FlashGeometry::new(highlights, h, first.dtype(), first.device())?;
     let omega = &geometry.omega;
     let f_cos = brdf.eval(omega, omega, maps)?;

@@ -8,9 +8,9 @@
 
 use candle_core::Tensor;
 
+use crate::Result;
 use crate::microfacet::COS_MIN;
 use crate::vecops::{dot3, normalize3};
-use crate::Result;
 
 /// Geometry of one evaluation.
 ///

@@ -2,6 +2,8 @@
 
 pub mod brdf_eval;
 pub mod brdfs;
+pub mod demo;
+pub mod previews;
 pub mod render;
 
 /// The f64 with the f32's shortest decimal form: spec constants written `0.04` in a plugin

@@ -1,0 +1,117 @@
+//! `photomat demo`: the bundled default job before any trained model exists. Generates a
+//! procedural, tileable material (glazed tiles for `height(ggx)`), writes it as a material
+//! folder and shows it: a render under the centred flash, an orbit contact sheet, and a sheet
+//! of its maps (diffuse, specular, roughness, derived normal, height).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use candle_core::Device;
+use photomat_core::image_io::{PngBits, contact_sheet, write_png};
+use photomat_core::map_files::{SaveOptions, save_maps};
+use photomat_core::{Highlight, lookup, render};
+use photomat_data::procedural::{Family, GlazedTiles};
+
+use super::previews::map_previews;
+use super::render::orbit;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// Output folder (created): material/, render.png, orbit.png, maps.png.
+    #[arg(long, value_name = "DIR", default_value = "demo")]
+    pub out: PathBuf,
+
+    /// Resolution of the material (texels per side).
+    #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(8..=4096))]
+    pub size: u32,
+
+    /// Seed of the procedural material: the same seed gives the same material.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+
+    /// Highlight positions of the orbit sheet.
+    #[arg(long, default_value_t = 8, value_parser = clap::value_parser!(u32).range(1..=64))]
+    pub orbit: u32,
+}
+
+pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
+    let family = GlazedTiles::default();
+    let brdf = lookup(&family.brdf())?;
+    let size = args.size as usize;
+    let maps = family.generate(size, args.seed, &Device::Cpu)?;
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create '{}'", args.out.display()))?;
+
+    let material_dir = args.out.join("material");
+    save_maps(&material_dir, brdf.as_ref(), &maps, &SaveOptions::default())?;
+
+    let centre = render(brdf.as_ref(), &maps, &[Highlight::CENTER])?;
+    let render_path = args.out.join("render.png");
+    write_png(
+        &render_path,
+        &photomat_core::image_io::PlanarImage::from_tensor(&centre)?,
+        PngBits::Eight,
+    )?;
+
+    let tiles = orbit(args.orbit as usize, 0.35)?
+        .iter()
+        .map(|h| {
+            Ok(photomat_core::image_io::PlanarImage::from_tensor(&render(
+                brdf.as_ref(),
+                &maps,
+                &[*h],
+            )?)?)
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let orbit_path = args.out.join("orbit.png");
+    write_png(&orbit_path, &contact_sheet(&tiles, 0.0)?, PngBits::Eight)?;
+
+    let maps_path = args.out.join("maps.png");
+    let previews = map_previews(brdf.as_ref(), &maps)?;
+    write_png(
+        &maps_path,
+        &contact_sheet(
+            &previews.iter().map(|(_, p)| p.clone()).collect::<Vec<_>>(),
+            0.0,
+        )?,
+        PngBits::Eight,
+    )?;
+
+    writeln!(
+        out,
+        "procedural material '{}' (seed {}, {size}×{size}), model {}",
+        "glazed tiles",
+        args.seed,
+        brdf.name()
+    )?;
+    writeln!(
+        out,
+        "  {}  maps: PNG + EXR + material.json",
+        material_dir.display()
+    )?;
+    writeln!(
+        out,
+        "  {}  render under the centred flash",
+        render_path.display()
+    )?;
+    writeln!(
+        out,
+        "  {}  {} flash positions on a circle of radius 0.35",
+        orbit_path.display(),
+        args.orbit
+    )?;
+    let names: Vec<_> = previews.iter().map(|(n, _)| n.as_str()).collect();
+    writeln!(
+        out,
+        "  {}  maps, left to right: {}",
+        maps_path.display(),
+        names.join(", ")
+    )?;
+    writeln!(
+        out,
+        "next: photomat render --maps {} --light 0.2,-0.1 --out lit.png",
+        material_dir.display()
+    )?;
+    Ok(())
+}
