@@ -2,9 +2,10 @@
 //!
 //! PhotoMat's estimator (paper §4 "Implementation"; reference `training/networks.py`,
 //! `CircularConv2d`) pads every convolution's input by wrapping around
-//! ([`crate::circular_pad`]) and then convolves without padding. Here the convolution is
-//! candle-nn's [`Conv2d`] with `padding = 0`, whose forward and backward passes are exact in
-//! candle 0.11 (DESIGN §6).
+//! ([`crate::circular_pad`]) and then convolves without padding. Here the parameters live in
+//! candle-nn's [`Conv2d`] (`padding = 0`); the convolution is candle's `conv2d` with the
+//! faster CPU backward of [`crate::conv_grad`] (same values, input gradient by `conv2d`
+//! instead of candle's slow direct-loop `conv_transpose2d`).
 //!
 //! Each layer keeps the size up to its stride ("same" convolution on the torus): a `k × k`
 //! kernel with stride `s` is padded by `(k − s)/2` on every side, so (H, W) → (H/s, W/s).
@@ -18,6 +19,7 @@ use candle_core::{Result, Tensor, bail};
 use candle_nn::{Conv2d, Conv2dConfig, Init, Module, VarBuilder};
 
 use crate::circular_pad::circular_pad;
+use crate::conv_grad::conv2d_fast_backward;
 
 /// Standard deviation of the initial biases (the reference's `bias.data.normal_(0, 0.02)`).
 const BIAS_INIT_STD: f64 = 0.02;
@@ -100,7 +102,11 @@ impl Module for CircularConv2d {
                 self.stride
             );
         }
-        self.conv.forward(&circular_pad(x, self.pad)?)
+        let y = conv2d_fast_backward(&circular_pad(x, self.pad)?, self.conv.weight(), self.stride)?;
+        match self.conv.bias() {
+            Some(bias) => y.broadcast_add(&bias.reshape((1, (), 1, 1))?),
+            None => Ok(y),
+        }
     }
 }
 

@@ -11,8 +11,11 @@
 //! ranges (applying the reference's tanh head exactly once, see [`unet`]).
 //!
 //! - [`Estimator`] / [`EstimatorConfig`]: the UNet ([`unet`]).
-//! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]).
+//! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]), differentiated
+//!   with [`conv2d_fast_backward`] ([`conv_grad`]): candle's CPU input gradient of `conv2d`
+//!   is ≈ 10× slower than its forward; the polyphase `conv2d` form is not.
 //! - [`circular_pad`]: wrap-around padding by `narrow` + `cat` ([`mod@circular_pad`]).
+//! - [`leaky_relu`]: the activation as one fused element-wise pass each way ([`activation`]).
 //! - [`upsample2x_periodic`]: ×2 bilinear upsampling with a periodic boundary as two
 //!   interpolation-matrix products ([`upsample`]).
 //!
@@ -38,13 +41,17 @@
 //! # Ok(()) }
 //! ```
 
+pub mod activation;
 pub mod circular_pad;
 pub mod conv;
+pub mod conv_grad;
 pub mod unet;
 pub mod upsample;
 
+pub use activation::leaky_relu;
 pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use conv::{CircularConv2d, circular_conv2d};
+pub use conv_grad::conv2d_fast_backward;
 pub use unet::{Estimator, EstimatorConfig};
 pub use upsample::{periodic_upsample_matrix, upsample2x_periodic};
 

@@ -20,7 +20,8 @@
 //!  head: up ×2, 3×3 conv 32→n                       (H)    → raw (B,n,H,W)
 //! ```
 //!
-//! Every conv is followed by LeakyReLU (slope 0.01, PyTorch's default) except the head; every
+//! Every conv is followed by LeakyReLU (slope 0.01, PyTorch's default; [`crate::activation`])
+//! except the head; every
 //! conv pads circularly ([`crate::conv`]); upsampling is periodic bilinear
 //! ([`crate::upsample`]). The fifth up level has no skip: the reference concatenates nothing
 //! at full resolution, its last level is upsample + output conv, which is the paper's final
@@ -46,6 +47,7 @@ use candle_core::{Module, Result, Tensor, bail};
 use candle_nn::VarBuilder;
 use photomat_core::{DifferentiableBrdf, MaterialMaps};
 
+use crate::activation::leaky_relu;
 use crate::conv::{CircularConv2d, circular_conv2d};
 use crate::upsample::upsample2x_periodic;
 
@@ -167,13 +169,6 @@ impl EstimatorConfig {
         }
         Ok(())
     }
-}
-
-/// LeakyReLU as `max(x, a·x)`, exact for 0 ≤ a ≤ 1: two element-wise ops instead of
-/// candle-nn's five (element-wise ops dominate the CPU backward, DESIGN §6). At x = 0 candle
-/// gives ties half of the gradient each, i.e. (1 + a)/2, a measure-zero difference.
-fn leaky_relu(x: &Tensor, slope: f64) -> Result<Tensor> {
-    x.maximum(&x.affine(slope, 0.0)?)
 }
 
 /// Encoder level: 4×4 stride-2 conv, LeakyReLU, 3×3 conv, LeakyReLU.
