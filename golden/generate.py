@@ -248,6 +248,8 @@ def extreme_ggx_cases():
     case("grazing_collocated_1e-3", at(1e-3, 60), at(1e-3, 60), 0.3)
     case("grazing_collocated_1e-6_rough", at(1e-6, 60), at(1e-6, 60), 1.0)
     case("grazing_i_smooth", at(1e-3, 0), at(0.5, 180), 0.15)
+    case("grazing_i_1e-8", at(1e-8, 30), at(0.7, 200), 0.5)
+    case("grazing_o_1e-8", at(0.7, 200), at(1e-8, 30), 0.5)
     # Grazing w.r.t. a tilted normal: the local cosine is rounded in float32 (ill-conditioned).
     case("grazing_tilted_normal", at(1e-3, 0, axis=at(0.5, 90)), at(0.6, 90), 0.4, n=at(0.5, 90))
     # On and below the horizon: exactly 0, gradients 0.
@@ -309,6 +311,8 @@ def extreme_coated_cases():
     case("grazing_both_1e-4", at(1e-4, 0), at(1e-4, 120), 0.5, 0.2)
     case("grazing_collocated_1e-3", at(1e-3, 60), at(1e-3, 60), 0.3, 0.2)
     case("grazing_collocated_1e-6_rough", at(1e-6, 60), at(1e-6, 60), 1.0, 1.0)
+    case("grazing_i_1e-8", at(1e-8, 30), at(0.7, 200), 0.5, 0.2)
+    case("grazing_o_1e-8", at(0.7, 200), at(1e-8, 30), 0.5, 0.2)
     case("horizon_i_exact", [1.0, 0.0, 0.0], at(0.7, 30), 0.5, 0.2)
     case("horizon_o_exact", at(0.7, 30), [0.0, 1.0, 0.0], 0.5, 0.2)
     case("below_horizon_i", at(-0.3, 10), at(0.7, 30), 0.5, 0.2)

@@ -14,6 +14,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use candle_core::{DType, Device, Tensor, Var};
+use photomat_core::microfacet::COS_MIN;
 use photomat_core::{DifferentiableBrdf, MaterialMaps};
 use serde::Deserialize;
 use serde::de::DeserializeOwned;
@@ -375,6 +376,25 @@ pub fn compare_brdf(
             continue;
         }
         if scope == Scope::RandomOnly && !case.tag.starts_with("random") {
+            continue;
+        }
+        // Below COS_MIN our cosines are clamped (core/src/microfacet.rs), Mitsuba's are not:
+        // f·cos θ_o is then f·COS_MIN instead of f·cos θ_o, and the ∂cos θ_o/∂n term is lost
+        // (golden/FINDINGS.md). Documented bound there: |Δ| ≤ COS_MIN·|f|; gradients finite.
+        if ours.cos_o[i] > 0.0 && ours.cos_o[i] < COS_MIN {
+            for c in 0..3 {
+                let (o, r) = (ours.f_cos[i][c], case.f_cos[c]);
+                let err = (o - r).abs() / (COS_MIN * case.f[c].abs() * (1.0 + tol.value));
+                report.record("cos θ_o < COS_MIN: |Δ| / (COS_MIN·f)", err, i, &case.tag);
+                if exceeds(err, 1.0) {
+                    fail(
+                        &mut report,
+                        format!(
+                            "f·cos θ_o[{c}] with cos θ_o below COS_MIN: ours {o:.9e} vs mitsuba {r:.9e}"
+                        ),
+                    );
+                }
+            }
             continue;
         }
         let strict = case.class == Class::Strict;
