@@ -65,6 +65,7 @@ if [[ -z "${DRJIT_LIBLLVM_PATH:-}" ]]; then
     if ! DRJIT_LIBLLVM_PATH="$(find_libllvm19)"; then
         echo "golden: installing libllvm19 (Dr.Jit's LLVM backend)"
         command -v apt-get >/dev/null 2>&1 || cannot_run "libLLVM 19 is missing and apt-get is not available (set DRJIT_LIBLLVM_PATH)."
+        export DEBIAN_FRONTEND=noninteractive
         if ! as_root apt-get install -y -q libllvm19; then
             as_root apt-get update -q || cannot_run "apt-get update failed (Debian mirror unreachable?)."
             as_root apt-get install -y -q libllvm19 || cannot_run "apt-get install libllvm19 failed."
@@ -81,7 +82,8 @@ PYTHON="${PYTHON:-python3}"
 command -v "$PYTHON" >/dev/null 2>&1 || cannot_run "$PYTHON not found (Python ≥ 3.8 with venv is needed)."
 STAMP="$VENV/.requirements.sha256"
 WANT="$(sha256sum "$HERE/requirements.txt" | cut -d' ' -f1)"
-if [[ ! -x "$VENV/bin/python" || ! -f "$STAMP" || "$(cat "$STAMP")" != "$WANT" ]]; then
+if [[ ! -x "$VENV/bin/python" || ! -f "$STAMP" || "$(cat "$STAMP")" != "$WANT" ]] \
+    || ! "$VENV/bin/python" -c "import mitsuba, drjit" >/dev/null 2>&1; then
     echo "golden: creating $VENV and installing $(grep -v '^#' "$HERE/requirements.txt" | xargs)"
     rm -rf "$VENV"
     "$PYTHON" -m venv "$VENV" || cannot_run "'$PYTHON -m venv' failed (install python3-venv)."
