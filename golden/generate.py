@@ -769,7 +769,7 @@ def height_golden(cases):
 # End-to-end renders
 
 RENDERS = [
-    # (file stem, model spec, size, highlight, seed tag)
+    # (file stem, model specification, size, highlight)
     ("render_ggx", "ggx", 32, (0.17, -0.11)),
     ("render_height_ggx", "height(ggx, scale=0.05)", 32, (0.08, 0.21)),
     ("render_coated", "coated", 32, (-0.23, 0.14)),

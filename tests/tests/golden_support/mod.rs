@@ -19,9 +19,6 @@ use photomat_core::{DifferentiableBrdf, MaterialMaps};
 use serde::Deserialize;
 use serde::de::DeserializeOwned;
 
-/// float32 unit roundoff, 2⁻²⁴.
-pub const U32: f64 = 1.0 / 16_777_216.0;
-
 /// The golden file `golden/<stem>.json`, parsed.
 pub fn load<T: DeserializeOwned>(stem: &str) -> T {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(format!("../golden/{stem}.json"));
