@@ -4,7 +4,11 @@
 //! Follows Mitsuba 3's `MicrofacetDistribution` (GGX, isotropic) and Walter et al. 2007,
 //! "Microfacet Models for Refraction through Rough Surfaces"; Schlick 1994 for Fresnel.
 //! Every plugin builds its specular lobes from these functions so that the α floor and the
-//! grazing-angle clamps live in exactly one place (pbrt-v4's `scattering.h` layout).
+//! numerically careful forms live in exactly one place (pbrt-v4's `scattering.h` layout).
+//!
+//! Precision (checked against Mitsuba by the goldens, `golden/FINDINGS.md`): no formula here
+//! subtracts `1 − cos²` or divides by a cosine. D takes sin²θ_h computed from the half vector
+//! (`|n × h|²`), and G1 uses division-free forms that are exact and finite down to cos = 0.
 //!
 //! Shapes: every argument is a per-texel scalar or colour, (B, 1|3, H, W), broadcastable.
 
@@ -16,41 +20,51 @@ use crate::Result;
 /// `MicrofacetDistribution` clamps at 1e-4 too; there the peak D = 1/(π α²) ≈ 3e7 fits f32.
 pub const ALPHA_MIN: f64 = 1e-4;
 
-/// Smallest cosine used in a denominator. Below it the geometry is clamped, not masked:
-/// G1(c)/c tends to a finite limit as c → 0, so the clamped value equals the limit to f32
-/// precision while keeping 1/c finite (1e-7 ≈ f32 machine epsilon).
-pub const COS_MIN: f64 = 1e-7;
-
 /// GGX α from perceptual roughness: `α = max(roughness², ALPHA_MIN)` (the mapping is fixed
 /// project-wide and locked by the goldens).
 pub fn alpha_from_roughness(roughness: &Tensor) -> Result<Tensor> {
     Ok(roughness.sqr()?.maximum(ALPHA_MIN)?)
 }
 
-/// GGX normal distribution D(h) from `cos_h = n·h` (B,1,H,W) and α (B,1,H,W):
-/// `D = 1 / (π α² (sin²θ/α² + cos²θ)²)`, Mitsuba's form (includes the 1/π).
-pub fn ggx_d(cos_h: &Tensor, alpha: &Tensor) -> Result<Tensor> {
-    let cos2 = cos_h.sqr()?;
-    // sin²θ = 1 − cos²θ; rounding can make it slightly negative at cos θ ≈ 1.
-    let sin2 = (1.0 - &cos2)?.maximum(0.0)?;
+/// GGX normal distribution D(h) from `cos_h = n·h`, `sin2_h = |n × h|²` and α (all
+/// (B,1,H,W)): `D = 1 / (π α² (sin²θ/α² + cos²θ)²)`, Mitsuba's form (includes the 1/π).
+/// Passing sin² separately avoids the cancellation of `1 − cos²` near the peak, which in f32
+/// costs D most of its digits at low roughness.
+pub fn ggx_d(cos_h: &Tensor, sin2_h: &Tensor, alpha: &Tensor) -> Result<Tensor> {
     let alpha2 = alpha.sqr()?;
-    let inner = (sin2.broadcast_div(&alpha2)? + cos2)?;
+    // For a unit normal sin² + cos² = 1, so the bracket is ≥ min(1, 1/α²) ≥ ½ whenever
+    // α ≤ √2 (roughness ≤ 1.19): the floor never binds on valid input and only keeps D finite
+    // for a zero (degenerate) normal, whose texel the shading mask zeroes anyway.
+    let inner = sin2_h
+        .broadcast_div(&alpha2)?
+        .broadcast_add(&cos_h.sqr()?)?
+        .maximum(0.5)?;
     let denom = (alpha2.broadcast_mul(&inner.sqr()?)? * std::f64::consts::PI)?;
     Ok(denom.recip()?)
 }
 
-/// Exact GGX Smith masking for one direction with `cos_v = n·v` already clamped to
-/// ≥ [`COS_MIN`]: `G1 = 2 / (1 + sqrt(1 + α² tan²θ))`.
-pub fn smith_g1(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
-    let cos2 = cos_v.sqr()?;
-    let tan2 = ((1.0 - &cos2)?.maximum(0.0)? / cos2)?; // same rounding guard as in ggx_d
-    let root = (alpha.sqr()?.broadcast_mul(&tan2)? + 1.0)?.sqrt()?; // argument ≥ 1: finite slope
-    Ok(((root + 1.0)?.recip()? * 2.0)?)
+/// `c + sqrt(c² + α²(1 − c²))` written as `c + sqrt(α² + c²(1 − α²))`: no cancellation, and the
+/// square root's argument is ≥ α² ≥ 1e-8 for c ∈ [0, 1], so its slope stays finite.
+fn smith_denominator(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
+    let alpha2 = alpha.sqr()?;
+    let root = cos_v
+        .sqr()?
+        .broadcast_mul(&(1.0 - &alpha2)?)?
+        .broadcast_add(&alpha2)?
+        .sqrt()?;
+    Ok((cos_v + root)?)
 }
 
-/// Separable Smith shadowing-masking `G = G1(wi)·G1(wo)`.
-pub fn smith_g(cos_i: &Tensor, cos_o: &Tensor, alpha: &Tensor) -> Result<Tensor> {
-    Ok((smith_g1(cos_i, alpha)? * smith_g1(cos_o, alpha)?)?)
+/// Exact GGX Smith masking for one direction, `cos_v = n·v ≥ 0`:
+/// `G1 = 2 / (1 + sqrt(1 + α² tan²θ)) = 2c / (c + sqrt(c² + α²(1 − c²)))`.
+pub fn smith_g1(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
+    Ok(((cos_v * 2.0)? / smith_denominator(cos_v, alpha)?)?)
+}
+
+/// `G1(c)/c = 2 / (c + sqrt(c² + α²(1 − c²)))` for `c ≥ 0`: finite (2/α) at c = 0, which is
+/// what lets the specular lobe divide by cos θ_i without any clamp.
+pub fn smith_g1_over_cos(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
+    Ok((smith_denominator(cos_v, alpha)?.recip()? * 2.0)?)
 }
 
 /// Schlick's Fresnel `F = F0 + (1 − F0)(1 − cos)^5` with `cos = wi·h` (B,1,H,W) and

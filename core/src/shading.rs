@@ -3,14 +3,14 @@
 //!
 //! Masking follows Mitsuba 3 (`diffuse.cpp`, `principled.cpp`): a pair with `n·wi ≤ 0` or
 //! `n·wo ≤ 0` contributes exactly 0. The mask is a 0/1 factor rather than a `where`, and every
-//! quantity it multiplies is computed from clamped cosines, so masked texels have value 0 *and*
-//! gradient 0 (a `where` over an infinite branch still back-propagates 0·∞ = NaN).
+//! quantity it multiplies stays finite for masked texels (cosines are floored at 0 and the
+//! microfacet forms never divide by a cosine), so masked texels have value 0 *and* gradient 0
+//! (a `where` over an infinite branch still back-propagates 0·∞ = NaN).
 
 use candle_core::Tensor;
 
 use crate::Result;
-use crate::microfacet::COS_MIN;
-use crate::vecops::{dot3, normalize3};
+use crate::vecops::{cross3, dot3, normalize3};
 
 /// Geometry of one evaluation.
 ///
@@ -18,12 +18,14 @@ use crate::vecops::{dot3, normalize3};
 /// All fields are (B, 1, H, W) per-texel scalars.
 #[derive(Debug, Clone)]
 pub struct ShadingGeometry {
-    /// `max(n·wi, COS_MIN)`.
+    /// `max(n·wi, 0)`.
     pub cos_i: Tensor,
-    /// `max(n·wo, COS_MIN)`.
+    /// `max(n·wo, 0)`.
     pub cos_o: Tensor,
     /// `n·h` with the half vector `h = normalize(wi + wo)`.
     pub cos_h: Tensor,
+    /// `|n × h|²` = sin²θ_h, computed without the cancellation of `1 − cos²θ_h`.
+    pub sin2_h: Tensor,
     /// `wi·h` (the Fresnel angle).
     pub cos_d: Tensor,
     /// 1 where both directions are strictly above the shading horizon, else 0.
@@ -41,9 +43,10 @@ impl ShadingGeometry {
         let mask = (raw_i.gt(0.0)?.to_dtype(dtype)? * raw_o.gt(0.0)?.to_dtype(dtype)?)?;
         let h = normalize3(&(wi + wo)?)?;
         Ok(Self {
-            cos_i: raw_i.maximum(COS_MIN)?,
-            cos_o: raw_o.maximum(COS_MIN)?,
+            cos_i: raw_i.maximum(0.0)?,
+            cos_o: raw_o.maximum(0.0)?,
             cos_h: dot3(&n, &h)?,
+            sin2_h: cross3(&n, &h)?.sqr()?.sum_keepdim(1)?,
             cos_d: dot3(wi, &h)?,
             mask,
         })

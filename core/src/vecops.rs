@@ -16,6 +16,17 @@ pub fn dot3(a: &Tensor, b: &Tensor) -> Result<Tensor> {
     Ok(a.broadcast_mul(b)?.sum_keepdim(1)?)
 }
 
+/// Per-texel cross product: (B, 3, H, W) × (B, 3, H, W) → (B, 3, H, W), broadcasting.
+pub fn cross3(a: &Tensor, b: &Tensor) -> Result<Tensor> {
+    let c = |t: &Tensor, i: usize| t.narrow(1, i, 1);
+    let (ax, ay, az) = (c(a, 0)?, c(a, 1)?, c(a, 2)?);
+    let (bx, by, bz) = (c(b, 0)?, c(b, 1)?, c(b, 2)?);
+    let x = (ay.broadcast_mul(&bz)? - az.broadcast_mul(&by)?)?;
+    let y = (az.broadcast_mul(&bx)? - ax.broadcast_mul(&bz)?)?;
+    let z = (ax.broadcast_mul(&by)? - ay.broadcast_mul(&bx)?)?;
+    Ok(Tensor::cat(&[x, y, z], 1)?)
+}
+
 /// Per-texel unit vector: (B, 3, H, W) → (B, 3, H, W). A zero vector stays zero.
 pub fn normalize3(v: &Tensor) -> Result<Tensor> {
     let len = v.sqr()?.sum_keepdim(1)?.maximum(NORM_SQ_FLOOR)?.sqrt()?;

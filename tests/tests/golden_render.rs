@@ -13,8 +13,9 @@ use support::{RenderGolden, Report, channels, exceeds, f32_exact, load, map_tens
 
 /// Per-pixel radiance, relative (the bound for renders).
 const F64_TOL: f64 = 1e-5;
-/// Our f32 renderer, where both sides round: measured worst 1.3e-5 (README).
-const F32_TOL: f64 = 5e-5;
+/// f32 renders: the 1e-5 too; measured worst 1.5e-6 since the microfacet terms are
+/// computed without cancellation (golden/FINDINGS.md).
+const F32_TOL: f64 = 1e-5;
 
 const RENDERS: [&str; 3] = ["render_ggx", "render_height_ggx", "render_coated"];
 

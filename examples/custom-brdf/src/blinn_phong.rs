@@ -29,7 +29,6 @@ use std::sync::Arc;
 
 use candle_core::Tensor;
 use photomat_core::lobes::lambert;
-use photomat_core::microfacet::COS_MIN;
 use photomat_core::{
     Brdf, BrdfArgs, BrdfRegistration, ColorSpace, DifferentiableBrdf, Encoding, MaterialMaps,
     ParamSpec, Result, ShadingGeometry, register_brdf,
@@ -98,6 +97,10 @@ pub fn exponent(glossiness: &Tensor) -> Result<Tensor> {
     )
 }
 
+/// Floor of n·h before its logarithm (see `blinn_phong_specular`): any positive value far below
+/// the cosines of unmasked texels works; 1e-7 ≈ f32 machine epsilon.
+const COS_H_MIN: f64 = 1e-7;
+
 /// The specular lobe's `k_s·(e + 2)/(8π)·(n·h)^e·cosθ_o`, masked below the horizon.
 ///
 /// # Shapes
@@ -112,7 +115,7 @@ pub fn blinn_phong_specular(
     // normalised sum), so only masked texels reach it; there it keeps ln finite, so they get
     // value 0 *and* gradient 0 instead of 0·∞ = NaN. Upper bound: rounding of the two unit
     // vectors can give n·h slightly above 1, which the exponent (up to 8192) would amplify.
-    let cos_h = geometry.cos_h.clamp(COS_MIN, 1.0)?;
+    let cos_h = geometry.cos_h.clamp(COS_H_MIN, 1.0)?;
     // (n·h)^e = exp(e·ln(n·h)): a per-texel exponent; underflows to exactly 0 for sharp lobes.
     let lobe = cos_h.log()?.broadcast_mul(&e)?.exp()?;
     let norm = ((e + 2.0)? / (8.0 * PI))?;
@@ -133,8 +136,8 @@ impl DifferentiableBrdf for BlinnPhong {
     }
 
     fn eval(&self, wi: &Tensor, wo: &Tensor, maps: &MaterialMaps) -> Result<Tensor> {
-        // Shared geometry: cosines clamped to ≥ COS_MIN (finite denominators) and the 0/1
-        // below-horizon mask, exactly as the built-in models use it.
+        // Shared geometry: cosines floored at 0 and the 0/1 below-horizon mask, exactly as
+        // the built-in models use it.
         let geometry = ShadingGeometry::new(wi, wo, maps.get("normal")?)?;
         let diffuse = lambert(&geometry, maps.get("diffuse")?)?;
         let specular =
