@@ -34,17 +34,28 @@ impl Highlight {
         Self { x, y }
     }
 
-    /// From continuous pixel coordinates of an R×R image (pixel (i, j) spans [i, i+1)×[j, j+1)):
-    /// `x = col/R − ½`, `y = ½ − row/R`.
+    /// From continuous pixel coordinates of an R×R image of the unit material square (pixel
+    /// (i, j) spans [i, i+1)×[j, j+1)): `x = col/R − ½`, `y = ½ − row/R`.
     pub fn from_pixel(row: f64, col: f64, size: usize) -> Self {
-        let r = size as f64;
-        Self::new(col / r - 0.5, 0.5 - row / r)
+        Self::from_pixel_on(row, col, size, PLANE_SIDE)
     }
 
     /// Continuous pixel coordinates `(row, col)` in an R×R image; inverse of [`Self::from_pixel`].
     pub fn to_pixel(self, size: usize) -> (f64, f64) {
+        self.to_pixel_on(size, PLANE_SIDE)
+    }
+
+    /// [`Self::from_pixel`] for an R×R image covering a centred square of side `side` (a whole
+    /// flash photo spans side 2: its H×H training crops are unit squares, DESIGN §4).
+    pub fn from_pixel_on(row: f64, col: f64, size: usize, side: f64) -> Self {
         let r = size as f64;
-        ((0.5 - self.y) * r, (self.x + 0.5) * r)
+        Self::new((col / r - 0.5) * side, (0.5 - row / r) * side)
+    }
+
+    /// Inverse of [`Self::from_pixel_on`].
+    pub fn to_pixel_on(self, size: usize, side: f64) -> (f64, f64) {
+        let r = size as f64;
+        ((0.5 - self.y / side) * r, (self.x / side + 0.5) * r)
     }
 
     /// Position of the collocated flash and camera.
@@ -53,12 +64,18 @@ impl Highlight {
     }
 }
 
-/// Centre of texel (row, col) of an R×R map: `((col+½)/R − ½, ½ − (row+½)/R, 0)`.
+/// Centre of texel (row, col) of an R×R map of the unit square:
+/// `((col+½)/R − ½, ½ − (row+½)/R, 0)`.
 pub fn texel_center(row: usize, col: usize, size: usize) -> DVec3 {
+    texel_center_on(row, col, size, PLANE_SIDE)
+}
+
+/// Centre of texel (row, col) of an R×R grid covering a centred square of side `side`.
+pub fn texel_center_on(row: usize, col: usize, size: usize, side: f64) -> DVec3 {
     let r = size as f64;
     DVec3::new(
-        ((col as f64 + 0.5) / r - 0.5) * PLANE_SIDE,
-        (0.5 - (row as f64 + 0.5) / r) * PLANE_SIDE,
+        ((col as f64 + 0.5) / r - 0.5) * side,
+        (0.5 - (row as f64 + 0.5) / r) * side,
         0.0,
     )
 }
@@ -73,13 +90,30 @@ pub struct FlashGeometry {
 }
 
 impl FlashGeometry {
-    /// Geometry for `highlights.len()` flash positions over an R×R plane.
+    /// Geometry for `highlights.len()` flash positions over an R×R map of the unit square.
     pub fn new(
         highlights: &[Highlight],
         size: usize,
         dtype: DType,
         device: &Device,
     ) -> Result<Self> {
+        Self::with_side(highlights, size, PLANE_SIDE, dtype, device)
+    }
+
+    /// Geometry over an R×R grid covering a centred square of side `side`, flash still at
+    /// height [`FLASH_HEIGHT`] (side 2 is a whole photo whose H×H crops are unit squares).
+    pub fn with_side(
+        highlights: &[Highlight],
+        size: usize,
+        side: f64,
+        dtype: DType,
+        device: &Device,
+    ) -> Result<Self> {
+        if !(side.is_finite() && side > 0.0) {
+            return Err(Error::Invalid(format!(
+                "plane side must be positive, got {side}"
+            )));
+        }
         if highlights.is_empty() || size == 0 {
             return Err(Error::Invalid(
                 "flash geometry needs at least one highlight and a non-empty map".into(),
@@ -101,7 +135,7 @@ impl FlashGeometry {
             let light = h.flash_position();
             for row in 0..size {
                 for col in 0..size {
-                    let to_light = light - texel_center(row, col, size);
+                    let to_light = light - texel_center_on(row, col, size, side);
                     let d2 = to_light.length_squared(); // ≥ FLASH_HEIGHT² > 0
                     let w = to_light / d2.sqrt();
                     let t = row * size + col;

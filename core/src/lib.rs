@@ -37,7 +37,7 @@ pub use flash::{FlashGeometry, Highlight};
 pub use maps::MaterialMaps;
 pub use param::{ColorSpace, Encoding, ParamSpec};
 pub use registry::{ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations};
-pub use render::{encode_display, render, render_radiance};
+pub use render::{encode_display, render, render_radiance, render_radiance_with};
 pub use shading::ShadingGeometry;
 
 /// Re-exports for [`register_brdf!`]; not part of the public API.

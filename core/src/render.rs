@@ -52,6 +52,25 @@ pub fn render_radiance(
         .map(|(_, t)| t)
         .expect("validated non-empty");
     let geometry = FlashGeometry::new(highlights, h, first.dtype(), first.device())?;
+    render_radiance_with(brdf, maps, &geometry)
+}
+
+/// Linear radiance under a prebuilt [`FlashGeometry`] (e.g. [`FlashGeometry::with_side`] for a
+/// whole photo spanning side 2). Maps (B|1, C, R, R) must match the geometry's R×R grid.
+/// Adapters that differentiate over texels (`height`) assume the unit square: on a square of
+/// side s, divide their `scale` by s.
+pub fn render_radiance_with(
+    brdf: &dyn DifferentiableBrdf,
+    maps: &MaterialMaps,
+    geometry: &FlashGeometry,
+) -> Result<Tensor> {
+    let (_, h, w) = maps.batch_and_size()?;
+    let (_, _, gh, gw) = geometry.omega.dims4()?;
+    if (h, w) != (gh, gw) {
+        return Err(Error::Invalid(format!(
+            "maps of {h}×{w} texels under a flash geometry of {gh}×{gw}"
+        )));
+    }
     let omega = &geometry.omega;
     let f_cos = brdf.eval(omega, omega, maps)?;
     Ok((f_cos.broadcast_mul(&geometry.inv_dist2)? * FLASH_INTENSITY)?)

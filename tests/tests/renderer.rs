@@ -261,3 +261,35 @@ fn renderer_rejects_bad_maps_with_clear_errors() {
         .to_string();
     assert!(err.contains("map 'diffuse' contains NaN"), "{err}");
 }
+
+#[test]
+fn flash_geometry_of_a_crop_equals_the_photo_geometry_restricted_to_it() {
+    // A whole photo of 2R texels spans side 2; its R×R crops are unit squares (DESIGN §4).
+    // Moving the highlight into crop coordinates must give exactly the photo's ω and 1/d².
+    use photomat_core::FlashGeometry;
+    let r = 16;
+    let photo_light = Highlight::new(0.3, -0.45);
+    let photo =
+        FlashGeometry::with_side(&[photo_light], 2 * r, 2.0, DType::F64, &Device::Cpu).unwrap();
+    for (top, left) in [(0, 0), (16, 16), (5, 11)] {
+        // Crop centre in photo-plane coordinates, then the highlight relative to it.
+        let centre = Highlight::from_pixel_on(
+            top as f64 + r as f64 / 2.0,
+            left as f64 + r as f64 / 2.0,
+            2 * r,
+            2.0,
+        );
+        let crop_light = Highlight::new(photo_light.x - centre.x, photo_light.y - centre.y);
+        let crop = FlashGeometry::new(&[crop_light], r, DType::F64, &Device::Cpu).unwrap();
+        let window = |t: &Tensor| values(&t.narrow(2, top, r).unwrap().narrow(3, left, r).unwrap());
+        let close = |a: Vec<f64>, b: Vec<f64>| a.iter().zip(&b).all(|(x, y)| (x - y).abs() < 1e-12);
+        assert!(
+            close(window(&photo.omega), values(&crop.omega)),
+            "ω differs for crop at ({top},{left})"
+        );
+        assert!(
+            close(window(&photo.inv_dist2), values(&crop.inv_dist2)),
+            "1/d² differs at ({top},{left})"
+        );
+    }
+}
