@@ -182,6 +182,20 @@ mod tests {
     }
 
     #[test]
+    fn leaky_relu_composite_path_agrees() -> Result<()> {
+        // f16 is not fused on the CPU and takes the max(x, a·x) path; a slope of ½ and inputs
+        // k/8 keep every value exact in f16.
+        let x = Tensor::new(&[-1.0f32, -0.375, 0.0, 0.25, 2.0], &Device::Cpu)?;
+        let y = leaky_relu(&x.to_dtype(DType::F16)?, 0.5)?.to_dtype(DType::F32)?;
+        assert_eq!(y.to_vec1::<f32>()?, [-0.5, -0.1875, 0.0, 0.25, 2.0]);
+        assert_eq!(
+            leaky_relu(&x, 0.5)?.to_vec1::<f32>()?,
+            [-0.5, -0.1875, 0.0, 0.25, 2.0]
+        );
+        Ok(())
+    }
+
+    #[test]
     fn leaky_relu_rejects_slopes_outside_unit_interval() {
         let x = Tensor::zeros(4, DType::F32, &Device::Cpu).expect("tensor");
         assert!(leaky_relu(&x, 1.5).is_err());

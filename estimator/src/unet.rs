@@ -21,19 +21,21 @@
 //! ```
 //!
 //! Every conv is followed by LeakyReLU (slope 0.01, PyTorch's default; [`crate::activation`])
-//! except the head; every
-//! conv pads circularly ([`crate::conv`]); upsampling is periodic bilinear
-//! ([`crate::upsample`]). The fifth up level has no skip: the reference concatenates nothing
-//! at full resolution, its last level is upsample + output conv, which is the paper's final
-//! "32→n" arrow.
+//! except the head; every conv pads circularly ([`crate::conv`]); upsampling is periodic
+//! bilinear ([`crate::upsample`]). The fifth up level has no skip: the reference concatenates
+//! nothing at full resolution, its last level is upsample + output conv, which is the paper's
+//! final "32→n" arrow. Weights start Xavier-normal, biases N(0, 0.02²), as the reference's
+//! `weights_init`.
 //!
 //! # The tanh head and the plugin decode
 //! The reference ends in `tanh` and maps to [0, 1] with `0.5·tanh(·) + 0.5`, then clamps
 //! per map. photomat's plugins decode *unconstrained* values with [`ParamSpec::decode`], which
 //! applies that same `(tanh x + 1)/2` itself (then the map's range and gamma). E therefore
 //! outputs the **pre-tanh** values of the reference's head (`raw = out.conv(x)`, no
-//! activation), and `brdf.decode(raw)` applies the tanh exactly once. Decoded maps equal the
-//! reference's `net(F)·0.5 + 0.5` for linear maps in [0, 1].
+//! activation), and `brdf.decode(raw)` applies the tanh exactly once. A map with the linear
+//! encoding and range [0, 1] thus decodes to exactly the reference's `net(F)·0.5 + 0.5`
+//! (before the reference's per-map clamps); other encodings (gamma-2.2 albedos, unit
+//! normals, other ranges) are the plugin's documented choice.
 //!
 //! # Tileability
 //! With circular padding and periodic upsampling every layer commutes with rolls by multiples
@@ -219,8 +221,7 @@ impl DecoderLevel {
 
 /// The map estimator E (see the module docs for the architecture).
 ///
-/// Parameters, as named under the [`VarBuilder`] (`C_in` = level input channels):
-/// `enc{i}.down.{weight,bias}` and `enc{i}.conv.*` (the reference's `block{i}.model.0` and
+/// Parameters, as named under the [`VarBuilder`]: `enc{i}.down.{weight,bias}` and `enc{i}.conv.*` (the reference's `block{i}.model.0` and
 /// `.model.2`, i < 5), `dec{j}.conv1.*` and `dec{j}.conv2.*` (reference `block{5+j}.model.0`
 /// and `.model.2`), `head.*` (reference `out`). Weights are (C_out, C_in, k, k), biases (C_out).
 #[derive(Debug, Clone)]
