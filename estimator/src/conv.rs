@@ -2,7 +2,7 @@
 //!
 //! PhotoMat's estimator (paper §4 "Implementation"; reference `training/networks.py`,
 //! `CircularConv2d`) pads every convolution's input by wrapping around
-//! ([`crate::circular_pad`]) and then convolves without padding. Here the parameters live in
+//! ([`crate::circular_pad()`]) and then convolves without padding. Here the parameters live in
 //! candle-nn's [`Conv2d`] (`padding = 0`); the convolution is candle's `conv2d` with the
 //! faster CPU backward of [`crate::conv_grad`] (same values, input gradient by `conv2d`
 //! instead of candle's slow direct-loop `conv_transpose2d`).

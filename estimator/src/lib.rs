@@ -14,7 +14,7 @@
 //! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]), differentiated
 //!   with [`conv2d_fast_backward`] ([`conv_grad`]): candle's CPU input gradient of `conv2d`
 //!   is ≈ 10× slower than its forward; the polyphase `conv2d` form is not.
-//! - [`circular_pad`]: wrap-around padding by `narrow` + `cat` ([`mod@circular_pad`]).
+//! - [`circular_pad()`]: wrap-around padding by `narrow` + `cat` ([`mod@circular_pad`]).
 //! - [`leaky_relu`]: the activation as one fused element-wise pass each way ([`activation`]).
 //! - [`upsample2x_periodic`]: ×2 bilinear upsampling with a periodic boundary as two
 //!   interpolation-matrix products ([`upsample`]).

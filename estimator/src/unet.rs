@@ -43,6 +43,13 @@
 //! `E(roll(F, 32·t)) = roll(E(F), 32·t)`; a periodic F gives periodic maps. Inputs must be
 //! multiples of 32 texels on each side.
 //!
+//! # Speed
+//! 5 674 632 parameters at n = 8. On the 2-core build machine (f32, dev profile with optimised
+//! dependencies, no other load; `examples/estimator_timing.rs`), one 64² batch-4 pass takes
+//! 138 ms forward and 387 ms backward; with candle's own conv2d backward and candle-nn's
+//! LeakyReLU it took 125 ms and 1240 ms ([`crate::conv_grad`], [`crate::activation`]).
+//! A 256² batch-1 pass: 471 ms forward, 934 ms backward.
+//!
 //! [`ParamSpec::decode`]: photomat_core::ParamSpec::decode
 
 use candle_core::{Module, Result, Tensor, bail};
