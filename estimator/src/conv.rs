@@ -4,7 +4,7 @@
 //! `CircularConv2d`) pads every convolution's input by wrapping around
 //! ([`crate::circular_pad()`]) and then convolves without padding. Here the parameters live in
 //! candle-nn's [`Conv2d`] (`padding = 0`); the convolution is candle's `conv2d` with the
-//! faster CPU backward of [`crate::conv_grad`] (same values, input gradient by `conv2d`
+//! faster CPU backward of [`photomat_kernels::conv_grad`] (same values, input gradient by `conv2d`
 //! instead of candle's slow direct-loop `conv_transpose2d`).
 //!
 //! Each layer keeps the size up to its stride ("same" convolution on the torus): a `k × k`
@@ -19,7 +19,7 @@ use candle_core::{Result, Tensor, bail};
 use candle_nn::{Conv2d, Conv2dConfig, Init, Module, VarBuilder};
 
 use crate::circular_pad::circular_pad;
-use crate::conv_grad::conv2d_fast_backward;
+use photomat_kernels::conv2d_fast_backward;
 
 /// Standard deviation of the initial biases (the reference's `bias.data.normal_(0, 0.02)`).
 const BIAS_INIT_STD: f64 = 0.02;

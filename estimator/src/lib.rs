@@ -12,10 +12,12 @@
 //!
 //! - [`Estimator`] / [`EstimatorConfig`]: the UNet ([`unet`]).
 //! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]), differentiated
-//!   with [`conv2d_fast_backward`] ([`conv_grad`]): candle's CPU input gradient of `conv2d`
-//!   is ≈ 10× slower than its forward; the polyphase `conv2d` form is not.
+//!   with [`conv2d_fast_backward`] ([`conv_grad`], from `photomat-kernels`): candle's CPU
+//!   input gradient of `conv2d` is ≈ 10× slower than its forward; the polyphase `conv2d`
+//!   form is not.
 //! - [`circular_pad()`]: wrap-around padding by `narrow` + `cat` ([`mod@circular_pad`]).
-//! - [`leaky_relu`]: the activation as one fused element-wise pass each way ([`activation`]).
+//! - [`leaky_relu`]: the activation as one fused element-wise pass each way ([`activation`],
+//!   from `photomat-kernels`).
 //! - [`upsample2x_periodic`]: ×2 bilinear upsampling with a periodic boundary as two
 //!   interpolation-matrix products ([`upsample`]).
 //!
@@ -41,12 +43,15 @@
 //! # Ok(()) }
 //! ```
 
-pub mod activation;
 pub mod circular_pad;
 pub mod conv;
-pub mod conv_grad;
 pub mod unet;
 pub mod upsample;
+
+/// The fused LeakyReLU, re-exported from `photomat-kernels` (its single home).
+pub use photomat_kernels::activation;
+/// The polyphase conv backward, re-exported from `photomat-kernels` (its single home).
+pub use photomat_kernels::conv_grad;
 
 pub use activation::leaky_relu;
 pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
@@ -55,41 +60,8 @@ pub use conv_grad::conv2d_fast_backward;
 pub use unet::{Estimator, EstimatorConfig};
 pub use upsample::{periodic_upsample_matrix, upsample2x_periodic};
 
-/// Deterministic test inputs shared by the unit tests.
+/// Deterministic test inputs shared by the unit tests (from `photomat-kernels`).
 #[cfg(test)]
 pub(crate) mod test_util {
-    use candle_core::{DType, Device, Result, Shape, Tensor};
-
-    /// Values uniform in [−1, 1) from a SplitMix64 stream seeded by `seed` (candle's CPU
-    /// generator cannot be seeded).
-    pub fn pseudo_random(
-        shape: impl Into<Shape>,
-        seed: u64,
-        dtype: DType,
-        device: &Device,
-    ) -> Result<Tensor> {
-        let shape = shape.into();
-        let mut state = seed;
-        let values: Vec<f64> = (0..shape.elem_count())
-            .map(|_| {
-                state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-                let mut z = state;
-                z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-                z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-                z ^= z >> 31;
-                (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-            })
-            .collect();
-        Tensor::from_vec(values, shape, device)?.to_dtype(dtype)
-    }
-
-    /// max |a − b| over all elements, as f64.
-    pub fn max_abs_diff(a: &Tensor, b: &Tensor) -> Result<f64> {
-        (a - b)?
-            .abs()?
-            .flatten_all()?
-            .max(0)?
-            .to_dtype(DType::F64)?
-            .to_scalar::<f64>()
-    }
+    pub use photomat_kernels::testing::{max_abs_diff, pseudo_random};
 }

@@ -1,13 +1,13 @@
 //! LeakyReLU as one fused element-wise pass forward and one backward.
 //!
-//! The estimator's activation (paper §4 "Implementation"; the reference uses PyTorch's
-//! `nn.LeakyReLU()`, slope 0.01): `f(x) = x` for x > 0, `a·x` otherwise, with PyTorch's
-//! derivative `f'(x) = 1` for x > 0 and `a` otherwise (so `a` at exactly 0).
+//! `f(x) = x` for x > 0, `a·x` otherwise, with PyTorch's derivative `f'(x) = 1` for x > 0 and
+//! `a` otherwise (so `a` at exactly 0). The estimator uses slope 0.01 (paper §4
+//! "Implementation"; the reference's `nn.LeakyReLU()`), the StyleGAN2 networks 0.2 (DESIGN §4).
 //!
-//! candle 0.11 element-wise ops are single-threaded and allocate per call (DESIGN §6); the
-//! composite forms cost 2–5 ops forward and ≈ 12 backward (`maximum`'s backward builds two
-//! masks, divides and accumulates). On the CPU this module runs one pass each way through
-//! candle custom ops; other devices use the equivalent `max(x, a·x)` composite.
+//! candle 0.11 element-wise ops allocate per call, and a composite LeakyReLU costs 2–5 ops
+//! forward and ≈ 12 backward (`maximum`'s backward builds two masks, divides and accumulates;
+//! DESIGN §6). On the CPU this module runs one pass each way through candle custom ops; other
+//! devices use the equivalent `max(x, a·x)` composite.
 
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Result, Shape, Tensor, bail};
@@ -132,7 +132,7 @@ mod tests {
     use candle_core::{DType, Device, Var};
 
     use super::*;
-    use crate::test_util::{max_abs_diff, pseudo_random};
+    use crate::testing::{max_abs_diff, pseudo_random};
 
     #[test]
     fn leaky_relu_matches_candle_nn_forward() -> Result<()> {

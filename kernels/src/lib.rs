@@ -1,0 +1,21 @@
+//! # photomat-kernels
+//!
+//! Fast CPU kernels for photomat's networks (issue 5), as candle 0.11 custom ops, each with
+//! its backward pass. candle's own CPU path runs this project's layers 5–8× slower than
+//! PyTorch CPU (DESIGN §6); the generator and the estimator call these ops instead where they
+//! measure faster (numbers in `docs/benchmarks.md`).
+//!
+//! - [`conv2d_fast_backward`]: unpadded strided `conv2d` whose input gradient is a polyphase
+//!   `conv2d` instead of candle's slow direct-loop `conv_transpose2d` ([`conv_grad`]).
+//! - [`leaky_relu`]: LeakyReLU as one fused element-wise pass each way ([`activation`]).
+//! - [`testing`]: seeded pseudo-random tensors and comparisons for tests and benchmarks.
+//!
+//! Conventions follow DESIGN §2: NCHW tensors, f32 for training (f64 accepted by every op so
+//! that gradient tests can be tight).
+
+pub mod activation;
+pub mod conv_grad;
+pub mod testing;
+
+pub use activation::leaky_relu;
+pub use conv_grad::conv2d_fast_backward;
