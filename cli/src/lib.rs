@@ -17,7 +17,9 @@
 //! - `photomat brdfs [--json]`: the registered models with their parameter tables and `n`;
 //! - `photomat render --maps DIR (--light X,Y | --orbit N) [--brdf SPEC] --out FILE.png`;
 //! - `photomat brdf-eval --brdf SPEC --cases FILE.json [--grad] [--f64]`: values (and
-//!   Jacobians) of a model at given directions and parameters, as JSON on stdout.
+//!   Jacobians) of a model at given directions and parameters, as JSON on stdout;
+//! - `photomat simulate --count N --size S --out DIR [--seed K] [--format jpg|png]`: phone-flash
+//!   photos of procedural materials with ground-truth maps and highlights.
 
 use std::ffi::OsString;
 use std::io::Write;
@@ -48,6 +50,8 @@ enum Command {
     Render(commands::render::Args),
     /// Evaluate a model at given directions and parameters; JSON values and gradients.
     BrdfEval(commands::brdf_eval::Args),
+    /// Simulate phone-flash photos of procedural materials, with their ground truth.
+    Simulate(commands::simulate::Args),
 }
 
 impl Command {
@@ -57,6 +61,7 @@ impl Command {
             Command::Brdfs(args) => commands::brdfs::run(args, out),
             Command::Render(args) => commands::render::run(args, out),
             Command::BrdfEval(args) => commands::brdf_eval::run(args, out),
+            Command::Simulate(args) => commands::simulate::run(args, out),
         }
     }
 }

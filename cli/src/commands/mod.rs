@@ -5,6 +5,7 @@ pub mod brdfs;
 pub mod demo;
 pub mod previews;
 pub mod render;
+pub mod simulate;
 
 /// The f64 with the f32's shortest decimal form: spec constants written `0.04` in a plugin
 /// show (and evaluate in f64) as 0.04 rather than 0.03999999910593033, the f32's exact value.

@@ -1,0 +1,197 @@
+//! Phone-flash photo simulator (issue 4, item 4): procedural materials photographed by a
+//! simulated phone with its flash on, written with their ground truth.
+//!
+//! Photo `i` of a run: its family is the `i mod F`-th of the run's F families (so every family
+//! is equally represented), then, from the photo's own random stream ([`random`]): the
+//! family's seed, the highlight ([`HighlightJitter`], Gaussian around the centre), the camera
+//! ([`PhoneCamera`] or a fixed [`CameraModel`]) and the sensor noise. The material is rendered
+//! over the photo's square of side 2 with the analytic flash renderer ([`scene`]), developed
+//! by the camera model ([`camera`]) and written with its shading-model maps and the true
+//! highlight ([`output`], format in docs/datasets.md). Photos are simulated in parallel
+//! (rayon); each depends only on `(seed, i)`, so the output is identical whatever the
+//! thread count.
+
+pub mod camera;
+pub mod output;
+pub mod random;
+pub mod scene;
+
+use std::path::Path;
+
+use candle_core::Device;
+use photomat_core::map_files::{SaveOptions, save_maps};
+use photomat_core::{Error, Highlight, Result};
+use rand::Rng;
+use rayon::prelude::*;
+
+pub use camera::{CameraModel, PhoneCamera, SceneRadiance, ToneCurve, ToneKind};
+pub use output::{
+    FORMAT_TAG, FORMAT_VERSION, PHOTOS_DIR, PhotoFormat, SIMULATION_FILE, SimulatedPhoto,
+    SimulationManifest, TRUTH_DIR, write_photo,
+};
+pub use scene::{HighlightJitter, PHOTO_SIDE, Scene};
+
+use crate::procedural::Family;
+
+/// Where each photo's camera comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum CameraSource {
+    /// A random phone camera per photo.
+    Phone(PhoneCamera),
+    /// The same camera for every photo (e.g. [`CameraModel::ideal`] in tests).
+    Fixed(CameraModel),
+}
+
+/// Parameters of a simulation run.
+#[derive(Clone)]
+pub struct SimulationConfig<'a> {
+    /// Number of photos.
+    pub count: usize,
+    /// Photo side S in pixels (also the resolution of the truth maps).
+    pub size: usize,
+    /// Run seed: equal seeds give byte-identical output.
+    pub seed: u64,
+    /// Photo file format.
+    pub format: PhotoFormat,
+    /// Families, cycled through in order ([`crate::procedural::families`] for all of them).
+    pub families: Vec<&'a dyn Family>,
+    /// The cameras.
+    pub camera: CameraSource,
+    /// The highlight distribution.
+    pub jitter: HighlightJitter,
+}
+
+/// Smallest photo side: the camera's centre-weighted meter needs a central half of at least
+/// one pixel, and the height adapter's central differences need three texels.
+pub const MIN_SIZE: usize = 4;
+
+/// Run a simulation into `out` (created): `photos/`, `truth/` and `simulation.json`, as
+/// docs/datasets.md describes. `progress` is called once per finished photo (from worker
+/// threads). Refuses an `out` that already holds `photos/` or `truth/` unless `overwrite`, in
+/// which case those two folders and `simulation.json` are removed first (nothing else is).
+pub fn simulate(
+    out: &Path,
+    config: &SimulationConfig<'_>,
+    overwrite: bool,
+    progress: &(dyn Fn() + Sync),
+) -> Result<SimulationManifest> {
+    if config.families.is_empty() {
+        return Err(Error::Invalid(
+            "the simulator needs at least one material family".into(),
+        ));
+    }
+    if config.size < MIN_SIZE {
+        return Err(Error::Invalid(format!(
+            "photos must be at least {MIN_SIZE}×{MIN_SIZE} pixels, got {0}×{0}",
+            config.size
+        )));
+    }
+    if let CameraSource::Fixed(camera) = &config.camera {
+        camera.validate()?;
+    }
+    prepare_output(out, overwrite)?;
+    let photos = (0..config.count)
+        .into_par_iter()
+        .map(|index| {
+            let record = simulate_photo(out, config, index);
+            progress();
+            record
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let manifest = SimulationManifest {
+        format: FORMAT_TAG.into(),
+        version: FORMAT_VERSION,
+        seed: config.seed,
+        size: config.size,
+        photos,
+    };
+    manifest.write(out)?;
+    Ok(manifest)
+}
+
+/// Create `out/photos` and `out/truth`, clearing a previous run when allowed.
+fn prepare_output(out: &Path, overwrite: bool) -> Result<()> {
+    let photos = out.join(PHOTOS_DIR);
+    let truth = out.join(TRUTH_DIR);
+    let manifest = out.join(SIMULATION_FILE);
+    let previous = [&photos, &truth, &manifest]
+        .into_iter()
+        .filter(|p| p.exists())
+        .collect::<Vec<_>>();
+    if !previous.is_empty() {
+        if !overwrite {
+            return Err(Error::file(
+                out,
+                format!(
+                    "already holds a simulation ({}); choose another folder or overwrite it",
+                    previous
+                        .iter()
+                        .map(|p| p.file_name().unwrap_or_default().to_string_lossy())
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            ));
+        }
+        for path in previous {
+            let removed = if path.is_dir() {
+                std::fs::remove_dir_all(path)
+            } else {
+                std::fs::remove_file(path)
+            };
+            removed.map_err(|e| Error::file(path, format!("cannot remove: {e}")))?;
+        }
+    }
+    for dir in [&photos, &truth] {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::file(dir, format!("cannot create: {e}")))?;
+    }
+    Ok(())
+}
+
+/// Simulate and write photo `index`; its record for `simulation.json`.
+fn simulate_photo(
+    out: &Path,
+    config: &SimulationConfig<'_>,
+    index: usize,
+) -> Result<SimulatedPhoto> {
+    let mut rng = random::photo_rng(config.seed, index as u64);
+    let family = config.families[index % config.families.len()];
+    let family_name = family.name();
+    // Below 2^32: every JSON reader keeps the seed exact.
+    let family_seed = rng.random::<u32>() as u64;
+    let context = |e: Error| {
+        Error::Invalid(format!(
+            "photo {index} (family '{family_name}', seed {family_seed}): {e}"
+        ))
+    };
+    let (row, col) = config.jitter.sample(config.size, &mut rng);
+    let highlight = Highlight::from_pixel_on(row, col, config.size, PHOTO_SIDE);
+    let scene =
+        Scene::from_family(family, config.size, family_seed, &Device::Cpu).map_err(context)?;
+    let light = scene.light(highlight).map_err(context)?;
+    let camera = match &config.camera {
+        CameraSource::Phone(phone) => phone.sample(&light, &mut rng).map_err(context)?,
+        CameraSource::Fixed(camera) => *camera,
+    };
+    let photo = camera.develop(&light, &mut rng).map_err(context)?;
+
+    let stem = format!("{index:06}");
+    let photo_rel = format!("{PHOTOS_DIR}/{stem}.{}", config.format.extension());
+    let truth_rel = format!("{TRUTH_DIR}/{stem}");
+    write_photo(&out.join(&photo_rel), &photo, config.format)?;
+    save_maps(
+        &out.join(&truth_rel),
+        scene.brdf().as_ref(),
+        scene.maps(),
+        &SaveOptions::default(),
+    )?;
+    Ok(SimulatedPhoto {
+        photo: photo_rel,
+        truth: truth_rel,
+        family: family_name.into(),
+        family_seed,
+        highlight_px: [row, col],
+        highlight: [highlight.x, highlight.y],
+        camera,
+    })
+}

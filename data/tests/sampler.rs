@@ -1,0 +1,298 @@
+//! The training crop sampler: crop geometry against the whole photo's, highlights moving with
+//! the image under flips and rotations, determinism, resizing, and the dataset index reader.
+
+use std::path::Path;
+
+use candle_core::{DType, Device, Tensor};
+use photomat_brdfs as _;
+use photomat_core::image_io::{PlanarImage, PngBits, write_png};
+use photomat_core::{FlashGeometry, Highlight};
+use photomat_data::dataset::{DatasetIndex, FlashDataset, PhotoEntry};
+use photomat_data::highlight::{DetectionStatus, DetectorKind};
+use photomat_data::sampler::{CropSampler, CropWindow, LightSampler, Symmetry, load_resized};
+use proptest::prelude::*;
+
+/// (C, H, W) f64 values of item 0 of an NCHW tensor.
+fn item(t: &Tensor, b: usize) -> PlanarImage {
+    PlanarImage::from_tensor(&t.narrow(0, b, 1).unwrap()).unwrap()
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn sampler_crop_omega_is_the_photo_omega_restricted(
+        h in 2usize..20,
+        // Highlights inside the photo and up to half a crop beyond it.
+        hr in -0.25f64..1.25,
+        hc in -0.25f64..1.25,
+        top_frac in 0.0f64..=1.0,
+        left_frac in 0.0f64..=1.0,
+        symmetry in 0usize..8,
+    ) {
+        let photo = 2 * h;
+        let highlight_px = (hr * photo as f64, hc * photo as f64);
+        let window = CropWindow {
+            size: h,
+            top: (top_frac * h as f64).round() as usize,
+            left: (left_frac * h as f64).round() as usize,
+            symmetry: Symmetry::ALL[symmetry],
+        };
+        let whole = FlashGeometry::with_side(
+            &[Highlight::from_pixel_on(highlight_px.0, highlight_px.1, photo, 2.0)],
+            photo,
+            2.0,
+            DType::F64,
+            &Device::Cpu,
+        )
+        .unwrap();
+        let crop = FlashGeometry::new(
+            &[window.highlight(highlight_px)],
+            h,
+            DType::F64,
+            &Device::Cpu,
+        )
+        .unwrap();
+        let whole_omega: Vec<f64> = whole.omega.flatten_all().unwrap().to_vec1().unwrap();
+        let whole_d2: Vec<f64> = whole.inv_dist2.flatten_all().unwrap().to_vec1().unwrap();
+        let crop_omega: Vec<f64> = crop.omega.flatten_all().unwrap().to_vec1().unwrap();
+        let crop_d2: Vec<f64> = crop.inv_dist2.flatten_all().unwrap().to_vec1().unwrap();
+        let (pp, hh) = (photo * photo, h * h);
+        for i in 0..h {
+            for j in 0..h {
+                let src = (window.top + i) * photo + window.left + j;
+                let (a, b) = window.symmetry.pixel((i, j), h);
+                let dst = a * h + b;
+                let v = window.symmetry.vector([
+                    whole_omega[src],
+                    whole_omega[pp + src],
+                    whole_omega[2 * pp + src],
+                ]);
+                for c in 0..3 {
+                    prop_assert!(
+                        (crop_omega[c * hh + dst] - v[c]).abs() < 1e-12,
+                        "ω[{c}] at crop pixel ({a}, {b}): {} vs {}",
+                        crop_omega[c * hh + dst],
+                        v[c]
+                    );
+                }
+                prop_assert!((crop_d2[dst] - whole_d2[src]).abs() < 1e-12);
+            }
+        }
+    }
+}
+
+/// A `photomat prepare` folder in `dir` holding `photos` (image, highlight (row, col)), all
+/// `size`², opened.
+fn write_dataset(dir: &Path, size: usize, photos: &[(PlanarImage, (f64, f64))]) -> FlashDataset {
+    std::fs::create_dir_all(dir.join("images")).unwrap();
+    let mut index = DatasetIndex::new(size, DetectorKind::Paper);
+    for (k, (image, (row, col))) in photos.iter().enumerate() {
+        let name = format!("images/{k:03}.png");
+        write_png(&dir.join(&name), image, PngBits::Eight).unwrap();
+        let h = Highlight::from_pixel_on(*row, *col, size, 2.0);
+        index.photos.push(PhotoEntry {
+            image: name,
+            // Sorted by source when written: keep the photos in order.
+            source: format!("/photos/{k:03}.jpg"),
+            source_bytes: 1,
+            source_modified: 0,
+            source_size: [size, size],
+            highlight_px: [*row, *col],
+            highlight: [h.x, h.y],
+            status: DetectionStatus::Detected,
+            reason: None,
+            truth_highlight_px: None,
+        });
+    }
+    index.write(dir).unwrap();
+    FlashDataset::open(dir).unwrap()
+}
+
+/// A dataset of dark `size`² photos, each with one white pixel: the one that contains its
+/// highlight (at the pixel's centre), plus a dim gradient so that crops differ.
+fn bright_pixel_dataset(dir: &Path, size: usize, highlights: &[(usize, usize)]) -> FlashDataset {
+    let plane = size * size;
+    let photos: Vec<_> = highlights
+        .iter()
+        .map(|&(r, c)| {
+            let mut data: Vec<f32> = (0..3 * plane)
+                .map(|i| 0.05 + 0.3 * ((i % plane) as f32 / plane as f32))
+                .collect();
+            for ch in 0..3 {
+                data[ch * plane + r * size + c] = 1.0;
+            }
+            (
+                PlanarImage::new(3, size, size, data).unwrap(),
+                (r as f64 + 0.5, c as f64 + 0.5),
+            )
+        })
+        .collect();
+    write_dataset(dir, size, &photos)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(24))]
+
+    #[test]
+    fn sampler_highlight_moves_with_the_image(
+        seed in any::<u64>(),
+        h in 4usize..12,
+        highlights in proptest::collection::vec((0.2f64..0.8, 0.2f64..0.8), 1..4),
+    ) {
+        let dir = tempfile::tempdir().unwrap();
+        let size = 2 * h;
+        let pixels: Vec<(usize, usize)> = highlights
+            .iter()
+            .map(|(r, c)| ((r * size as f64) as usize, (c * size as f64) as usize))
+            .collect();
+        let dataset = bright_pixel_dataset(dir.path(), size, &pixels);
+        let mut sampler = CropSampler::new(h, seed).unwrap();
+        let batch = sampler.sample(&dataset, 8, &Device::Cpu).unwrap();
+        prop_assert_eq!(batch.images.dims(), &[8, 3, h, h]);
+        prop_assert_eq!(batch.omega.dims(), &[8, 3, h, h]);
+        for (b, highlight) in batch.highlights.iter().enumerate() {
+            let crop = item(&batch.images, b);
+            // Network range: the white pixel is 1, the background below 0.
+            let bright: Vec<(usize, usize)> = (0..h * h)
+                .filter(|t| crop.data[h * h + t] > 0.9)
+                .map(|t| (t / h, t % h))
+                .collect();
+            let (row, col) = highlight.to_pixel(h);
+            if (0.0..h as f64).contains(&row) && (0.0..h as f64).contains(&col) {
+                prop_assert_eq!(
+                    bright,
+                    vec![(row.floor() as usize, col.floor() as usize)],
+                    "item {}: highlight ({}, {})", b, row, col
+                );
+            } else {
+                prop_assert!(bright.is_empty(), "item {}: highlight ({}, {}) outside", b, row, col);
+            }
+            // ω belongs to the returned highlight.
+            let expected = FlashGeometry::new(&[*highlight], h, DType::F32, &Device::Cpu)
+                .unwrap()
+                .omega;
+            let diff = (batch.omega.narrow(0, b, 1).unwrap() - expected)
+                .unwrap()
+                .abs()
+                .unwrap()
+                .flatten_all()
+                .unwrap()
+                .max(0)
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap();
+            prop_assert_eq!(diff, 0.0);
+        }
+    }
+}
+
+fn to_vec(t: &Tensor) -> Vec<f32> {
+    t.flatten_all().unwrap().to_vec1().unwrap()
+}
+
+#[test]
+fn sampler_is_deterministic_under_a_seed() {
+    let dir = tempfile::tempdir().unwrap();
+    let dataset = bright_pixel_dataset(dir.path(), 16, &[(5, 9), (8, 8), (10, 3)]);
+    let draw = |seed| {
+        CropSampler::new(8, seed)
+            .unwrap()
+            .sample(&dataset, 6, &Device::Cpu)
+            .unwrap()
+    };
+    let (a, b, c) = (draw(4), draw(4), draw(5));
+    assert_eq!(to_vec(&a.images), to_vec(&b.images));
+    assert_eq!(a.highlights, b.highlights);
+    assert_ne!(a.highlights, c.highlights);
+    // The light sampler draws the crop sampler's highlights under the same seed.
+    let lights = LightSampler::new(&dataset, 8, 4).unwrap().sample(6);
+    assert_eq!(lights, a.highlights);
+    // Successive batches differ.
+    let mut sampler = CropSampler::new(8, 4).unwrap();
+    let first = sampler.sample(&dataset, 6, &Device::Cpu).unwrap();
+    let second = sampler.sample(&dataset, 6, &Device::Cpu).unwrap();
+    assert_eq!(first.highlights, a.highlights);
+    assert_ne!(first.highlights, second.highlights);
+}
+
+#[test]
+fn sampler_highlights_may_fall_outside_the_crop() {
+    let dir = tempfile::tempdir().unwrap();
+    // Highlights near a corner of the photo: most crops do not contain them.
+    let dataset = bright_pixel_dataset(dir.path(), 16, &[(1, 2), (14, 13)]);
+    let mut sampler = CropSampler::new(8, 9).unwrap();
+    let batch = sampler.sample(&dataset, 32, &Device::Cpu).unwrap();
+    let outside = batch
+        .highlights
+        .iter()
+        .filter(|h| h.x.abs() > 0.5 || h.y.abs() > 0.5)
+        .count();
+    assert!(outside > 8, "{outside} of 32 outside");
+    // ω stays a field of unit vectors pointing up.
+    let omega = item(&batch.omega, 0);
+    for t in 0..64 {
+        let v = [omega.data[t], omega.data[64 + t], omega.data[128 + t]];
+        let len = v.iter().map(|x| x * x).sum::<f32>().sqrt();
+        assert!((len - 1.0).abs() < 1e-5 && v[2] > 0.0);
+    }
+}
+
+#[test]
+fn sampler_resizes_photos_to_twice_the_model_size() {
+    let dir = tempfile::tempdir().unwrap();
+    // 48² photos with a white 3×3 block around the highlight, model size 8 (photos → 16²).
+    let size = 48;
+    let plane = size * size;
+    let mut data = vec![0.1f32; 3 * plane];
+    for ch in 0..3 {
+        for r in 21..24 {
+            for c in 30..33 {
+                data[ch * plane + r * size + c] = 1.0;
+            }
+        }
+    }
+    let dataset = write_dataset(
+        dir.path(),
+        size,
+        &[(PlanarImage::new(3, size, size, data).unwrap(), (22.5, 31.5))],
+    );
+    let (photo, highlight) = load_resized(&dataset, 0, 16).unwrap();
+    assert_eq!((photo.height, photo.width), (16, 16));
+    assert_eq!(highlight, (7.5, 10.5));
+    // The block (source pixels 21..24 × 30..33) shrinks to pixel (7, 10), around the moved
+    // highlight.
+    let brightest = (0..256).max_by(|&a, &b| photo.data[a].total_cmp(&photo.data[b]));
+    assert_eq!(brightest, Some(7 * 16 + 10));
+    // Resampled in linear light: Lanczos3 widened 3× puts 77 % of its weight on the block,
+    // which gives 0.89 in linear light and 0.79 when averaging display values.
+    assert!(photo.get(0, 7, 10) > 0.85, "{}", photo.get(0, 7, 10));
+    assert!(photo.data.iter().all(|v| (0.0..=1.0).contains(v)));
+    let batch = CropSampler::new(8, 0)
+        .unwrap()
+        .sample(&dataset, 4, &Device::Cpu)
+        .unwrap();
+    assert_eq!(batch.images.dims(), &[4, 3, 8, 8]);
+    let values = to_vec(&batch.images);
+    assert!(values.iter().all(|v| (-1.0..=1.0).contains(v)));
+}
+
+#[test]
+fn sampler_errors_name_the_missing_photo() {
+    let dir = tempfile::tempdir().unwrap();
+    let dataset = bright_pixel_dataset(dir.path(), 16, &[(8, 8)]);
+    std::fs::remove_file(dir.path().join("images/000.png")).unwrap();
+    let err = CropSampler::new(8, 0)
+        .unwrap()
+        .sample(&dataset, 2, &Device::Cpu)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("000.png"), "{err}");
+    assert!(CropSampler::new(0, 0).is_err());
+    assert!(
+        CropSampler::new(8, 0)
+            .unwrap()
+            .sample(&dataset, 0, &Device::Cpu)
+            .is_err()
+    );
+}
