@@ -174,7 +174,66 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     )?;
     writeln!(
         out,
-        "next: photomat prepare --photos {dir} --out {dir}-dataset"
+        "next: photomat prepare --photos {dir}/photos --out {dir}-dataset"
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn simulate_command_writes_photos_truth_and_record() {
+        let dir = tempfile::tempdir().unwrap();
+        let out_dir = dir.path().join("sim");
+        let out_arg = out_dir.to_str().unwrap();
+        let args = [
+            "photomat",
+            "simulate",
+            "--count",
+            "3",
+            "--size",
+            "16",
+            "--out",
+            out_arg,
+            "--families",
+            "wood, tiles",
+            "--format",
+            "png",
+            "--seed",
+            "5",
+        ];
+        let mut out = Vec::new();
+        crate::run_with_output(args, &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        assert!(
+            text.contains("simulated 3 photos of 16×16 (seed 5)"),
+            "{text}"
+        );
+        assert!(text.contains("families: tiles, wood"), "{text}");
+        let record = photomat_data::simulator::SimulationManifest::read(&out_dir).unwrap();
+        let families: Vec<&str> = record.photos.iter().map(|p| p.family.as_str()).collect();
+        assert_eq!(families, ["tiles", "wood", "tiles"]);
+        for photo in &record.photos {
+            assert!(out_dir.join(&photo.photo).is_file());
+            assert!(out_dir.join(&photo.truth).join("material.json").is_file());
+        }
+        // A second run into the same folder needs --overwrite.
+        let err = crate::run_with_output(args, &mut Vec::new()).unwrap_err();
+        assert!(format!("{err:#}").contains("--overwrite"), "{err:#}");
+        let bad = crate::run_with_output(
+            [
+                "photomat",
+                "simulate",
+                "--count",
+                "1",
+                "--out",
+                out_arg,
+                "--families",
+                "marble",
+            ],
+            &mut Vec::new(),
+        )
+        .unwrap_err();
+        assert!(format!("{bad:#}").contains("wood"), "{bad:#}");
+    }
 }

@@ -30,7 +30,9 @@
 //!   Poissonian-Gaussian noise modeling"), the Poisson part in its Gaussian approximation:
 //!   variance `σ²·s` (shot noise, σ = `noise_sigma` is the noise at full scale) plus a
 //!   signal-independent read noise of standard deviation `ρσ`, ρ = [`READ_NOISE_RATIO`]. The
-//!   sensor saturates at 1.
+//!   channels' noise is correlated ([`NOISE_CHANNEL_CORRELATION`]): demosaicing spreads each
+//!   photosite's noise over R, G and B, and the ISP's chroma denoising leaves mostly grey
+//!   grain. The sensor saturates at 1.
 //! - `tone`: the ISP's tone curve ([`ToneCurve`]): gamma 2.2 (what PhotoMat assumes photos
 //!   are) or the sRGB curve, optionally followed by a mild S-curve.
 //!
@@ -52,6 +54,10 @@ use super::random::{log_uniform, standard_normal, uniform};
 /// Read-noise standard deviation as a fraction of `noise_sigma`: phone sensors at base ISO
 /// are shot-noise limited except in the deepest shadows.
 pub const READ_NOISE_RATIO: f64 = 0.1;
+
+/// Correlation of the three channels' noise at one pixel (each channel keeps its variance):
+/// phone JPEGs show luminance grain with little colour speckle.
+pub const NOISE_CHANNEL_CORRELATION: f64 = 0.75;
 
 /// Rec. 709 luminance weights, used by the exposure meter.
 const LUMINANCE: [f64; 3] = [0.2126, 0.7152, 0.0722];
@@ -315,23 +321,28 @@ impl CameraModel {
                 let h2 = photomat_core::flash::FLASH_HEIGHT.powi(2);
                 let cos2 = h2 / (h2 + p.x * p.x + p.y * p.y);
                 let vignette = 1.0 - self.vignetting + self.vignetting * cos2 * cos2;
-                for c in 0..3 {
+                // Unit-variance noise per channel with correlation NOISE_CHANNEL_CORRELATION:
+                // a shared draw plus an independent one per channel (none drawn when noiseless).
+                let noise: [f64; 3] = if self.noise_sigma > 0.0 {
+                    let corr = NOISE_CHANNEL_CORRELATION;
+                    let shared = corr.sqrt() * standard_normal(rng);
+                    let own = (1.0 - corr).sqrt();
+                    [(); 3].map(|_| shared + own * standard_normal(rng))
+                } else {
+                    [0.0; 3]
+                };
+                for (c, (&gain, &z)) in self.white_balance.iter().zip(&noise).enumerate() {
                     let i = c * plane + t;
-                    let light = self.white_balance[c]
+                    let light = gain
                         * (beam * scene.flash.data[i] as f64
                             + self.ambient * scene.ambient_reflectance.data[i] as f64);
                     // Radiance is ≥ 0; the max only guards the square root against a
                     // plugin's −0 or rounding.
                     let signal = (self.exposure * vignette * light).max(0.0);
-                    let sensed = if self.noise_sigma > 0.0 {
-                        let sigma2 = self.noise_sigma * self.noise_sigma;
-                        let std = (sigma2 * (signal + READ_NOISE_RATIO * READ_NOISE_RATIO)).sqrt();
-                        signal + std * standard_normal(rng)
-                    } else {
-                        signal
-                    };
+                    let sigma2 = self.noise_sigma * self.noise_sigma;
+                    let std = (sigma2 * (signal + READ_NOISE_RATIO * READ_NOISE_RATIO)).sqrt();
                     // The sensor saturates at full scale and counts no negative light.
-                    let sensed = sensed.clamp(0.0, 1.0);
+                    let sensed = (signal + std * z).clamp(0.0, 1.0);
                     out.data[i] = self.tone_curve.apply(sensed) as f32;
                 }
             }
@@ -411,7 +422,8 @@ impl PhoneCamera {
         } else {
             ToneKind::Gamma22
         };
-        let contrast = uniform(rng, self.contrast);
+        // Rounded to 0.001: the curve's name in simulation.json stays short (`srgb+s0.126`).
+        let contrast = (uniform(rng, self.contrast) * 1000.0).round() / 1000.0;
 
         // Centre-weighted metering: mean luminance over the central half of the frame.
         let (lo, hi) = (size / 4, size - size / 4);
@@ -554,6 +566,21 @@ mod tests {
                 "signal {signal}: variance {var}, expected {expected}"
             );
             assert!((mean - signal as f64).abs() < 1e-3);
+            // Channels share NOISE_CHANNEL_CORRELATION of their noise (16 384 pixels: the
+            // estimate's standard error is (1 − ρ²)/√n ≈ 0.004).
+            let plane = linear.len() / 3;
+            let (r, g) = (&linear[..plane], &linear[plane..2 * plane]);
+            let cov = r
+                .iter()
+                .zip(g)
+                .map(|(a, b)| (a - mean) * (b - mean))
+                .sum::<f64>();
+            let norm = |x: &[f64]| x.iter().map(|a| (a - mean).powi(2)).sum::<f64>().sqrt();
+            let corr = cov / (norm(r) * norm(g));
+            assert!(
+                (corr - NOISE_CHANNEL_CORRELATION).abs() < 0.03,
+                "signal {signal}: channel correlation {corr}"
+            );
         }
     }
 

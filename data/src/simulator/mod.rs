@@ -123,7 +123,8 @@ fn prepare_output(out: &Path, overwrite: bool) -> Result<()> {
             return Err(Error::file(
                 out,
                 format!(
-                    "already holds a simulation ({}); choose another folder or overwrite it",
+                    "already holds a simulation ({}); choose another folder or allow overwriting \
+                     (photomat simulate --overwrite)",
                     previous
                         .iter()
                         .map(|p| p.file_name().unwrap_or_default().to_string_lossy())
