@@ -1,0 +1,292 @@
+//! The light-conditioned discriminator D (PhotoMat paper §4 "Implementation": StyleGAN2's
+//! discriminator with the per-pixel light directions concatenated to the RGB input, 6
+//! channels; StyleGAN2 "resnet" D, Karras et al. 2020 Fig. 7c, StyleGAN2-ADA
+//! `DiscriminatorBlock` and `DiscriminatorEpilogue`).
+//!
+//! ```text
+//! RGB ‖ ω (B,6,R,R) → fromrgb 1×1 (C_R) ─┐
+//! block r (R … 8):  x ─┬─ conv0 3×3 ── conv1 3×3 ↓2 ──·√½ ─⊕→ (C_{r/2}, r/2)
+//!                      └─ skip 1×1 ↓2, no bias ───────·√½ ─┘
+//! epilogue (4²): minibatch stddev (+1 ch) → conv 3×3 → fc (C₄·16 → C₄) → out (C₄ → 1)
+//! ```
+//!
+//! Every conv and fc is an equalised-lr layer ([`crate::equalized`], λ = 1, biases 0) followed
+//! by `lrelu` except the skip and the output. Downsampling uses the [1,3,3,1] FIR filter
+//! ([`crate::fir`]) exactly as StyleGAN2's `conv2d_resample`: blur then stride-2 conv for the
+//! 3×3 conv1, filter-and-decimate then 1×1 for the skip. D pads with zeros: it judges real
+//! crops, which are not periodic, so it is the same in tileable mode.
+//!
+//! # Minibatch standard deviation
+//! StyleGAN2 splits the batch into groups of G = min(4, B) samples (sample n in group
+//! n mod (B/G)), computes per group the standard deviation of every feature over the group,
+//! averages it over features and pixels into `mbstd_channels` = 1 value per group and appends
+//! it as a constant channel. StyleGAN2 requires B to be a multiple of G; here the batch is
+//! split into ⌈B/G⌉ groups by the same rule (sample n in group n mod ⌈B/G⌉), whose sizes then
+//! differ by at most one and are ≥ 2 for B ≥ 2: identical to StyleGAN2 when G divides B, and
+//! defined for any B. ε = 1e-8 inside the square root (StyleGAN2) keeps the derivative finite
+//! (≤ 1/(2·10⁻⁴)) when a group's samples coincide, which a single-sample group always does.
+//!
+//! Parameter names under `vb`: `b{r}.{fromrgb,conv0,conv1,skip}.{weight,bias}` for r = R … 8,
+//! `b4.{conv,fc,out}.{weight,bias}`.
+
+use candle_core::{D, Result, Tensor, bail};
+use candle_nn::VarBuilder;
+
+use crate::activation::lrelu;
+use crate::equalized::{
+    EqualizedConv2d, EqualizedLinear, LinearConfig, equalized_conv2d, equalized_linear,
+};
+use crate::fir::{blur_for_strided_conv, downsample2d};
+use crate::padding::{Padding, pad2d};
+use crate::relight::{OMEGA_CHANNELS, RGB_CHANNELS};
+use crate::{BASE_RESOLUTION, GeneratorConfig};
+
+/// ε of the minibatch standard deviation (justified in the module docs).
+pub const MBSTD_EPS: f64 = 1e-8;
+/// √½: the residual branches' gain, keeping the sum's variance.
+const RESIDUAL_GAIN: f64 = std::f64::consts::FRAC_1_SQRT_2;
+
+/// StyleGAN2's `Conv2dLayer`: conv (optionally ↓2), bias, optional `lrelu`, times `gain`.
+#[derive(Debug, Clone)]
+struct DConv {
+    conv: EqualizedConv2d,
+    activate: bool,
+    down: bool,
+    gain: f64,
+}
+
+fn dconv(
+    c_in: usize,
+    c_out: usize,
+    kernel: usize,
+    (bias, activate, down, gain): (bool, bool, bool, f64),
+    vb: VarBuilder,
+) -> Result<DConv> {
+    Ok(DConv {
+        conv: equalized_conv2d(c_in, c_out, kernel, bias, vb)?,
+        activate,
+        down,
+        gain,
+    })
+}
+
+impl DConv {
+    /// # Shapes
+    /// (B, C_in, H, W) → (B, C_out, H/2, W/2) when downsampling, (B, C_out, H, W) otherwise.
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let k = self.conv.kernel();
+        let y = match (self.down, k) {
+            (false, _) => self
+                .conv
+                .conv_unpadded(&pad2d(x, k / 2, Padding::Zeros)?, 1)?,
+            (true, 1) => self
+                .conv
+                .conv_unpadded(&downsample2d(x, Padding::Zeros)?, 1)?,
+            (true, 3) => self
+                .conv
+                .conv_unpadded(&blur_for_strided_conv(x, Padding::Zeros)?, 2)?,
+            (true, k) => bail!("discriminator: no downsampling {k}×{k} conv"),
+        };
+        let y = self.conv.add_bias(&y)?;
+        let y = if self.activate { lrelu(&y)? } else { y };
+        if self.gain == 1.0 {
+            Ok(y)
+        } else {
+            y.affine(self.gain, 0.0)
+        }
+    }
+}
+
+/// One residual block of D, halving the resolution.
+#[derive(Debug, Clone)]
+struct DBlock {
+    fromrgb: Option<DConv>,
+    conv0: DConv,
+    conv1: DConv,
+    skip: DConv,
+}
+
+impl DBlock {
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let x = match &self.fromrgb {
+            Some(f) => f.forward(x)?,
+            None => x.clone(),
+        };
+        let y = self.skip.forward(&x)?;
+        let x = self.conv1.forward(&self.conv0.forward(&x)?)?;
+        y + x
+    }
+}
+
+/// The discriminator D.
+#[derive(Debug, Clone)]
+pub struct Discriminator {
+    blocks: Vec<DBlock>,
+    conv: DConv,
+    fc: EqualizedLinear,
+    out: EqualizedLinear,
+    resolution: usize,
+    mbstd_group_size: usize,
+    mbstd_channels: usize,
+}
+
+impl Discriminator {
+    /// Builds D of `cfg` (resolution, channel table, minibatch-stddev settings) under `vb`.
+    pub fn new(cfg: &GeneratorConfig, vb: VarBuilder) -> Result<Self> {
+        cfg.validate()?;
+        let mut blocks = Vec::new();
+        let mut res = cfg.resolution;
+        while res > BASE_RESOLUTION {
+            let vb = vb.pp(format!("b{res}"));
+            let (c, c_out) = (cfg.channels_at(res), cfg.channels_at(res / 2));
+            let fromrgb = if res == cfg.resolution {
+                let spec = (true, true, false, 1.0);
+                Some(dconv(
+                    RGB_CHANNELS + OMEGA_CHANNELS,
+                    c,
+                    1,
+                    spec,
+                    vb.pp("fromrgb"),
+                )?)
+            } else {
+                None
+            };
+            blocks.push(DBlock {
+                fromrgb,
+                conv0: dconv(c, c, 3, (true, true, false, 1.0), vb.pp("conv0"))?,
+                conv1: dconv(
+                    c,
+                    c_out,
+                    3,
+                    (true, true, true, RESIDUAL_GAIN),
+                    vb.pp("conv1"),
+                )?,
+                skip: dconv(
+                    c,
+                    c_out,
+                    1,
+                    (false, false, true, RESIDUAL_GAIN),
+                    vb.pp("skip"),
+                )?,
+            });
+            res /= 2;
+        }
+        let vb = vb.pp(format!("b{BASE_RESOLUTION}"));
+        let c4 = cfg.channels_at(BASE_RESOLUTION);
+        let conv = dconv(
+            c4 + cfg.mbstd_channels,
+            c4,
+            3,
+            (true, true, false, 1.0),
+            vb.pp("conv"),
+        )?;
+        let area = BASE_RESOLUTION * BASE_RESOLUTION;
+        let fc = equalized_linear(c4 * area, c4, LinearConfig::default(), vb.pp("fc"))?;
+        let out = equalized_linear(c4, 1, LinearConfig::default(), vb.pp("out"))?;
+        Ok(Self {
+            blocks,
+            conv,
+            fc,
+            out,
+            resolution: cfg.resolution,
+            mbstd_group_size: cfg.mbstd_group_size,
+            mbstd_channels: cfg.mbstd_channels,
+        })
+    }
+
+    /// Logits for images under their light directions.
+    ///
+    /// # Shapes
+    /// image (B, 3, R, R) in encoded space, omega (B, 3, R, R) → (B, 1).
+    pub fn forward(&self, image: &Tensor, omega: &Tensor) -> Result<Tensor> {
+        let (b, c, h, w) = image.dims4()?;
+        if c != RGB_CHANNELS || (h, w) != (self.resolution, self.resolution) {
+            bail!(
+                "discriminator: image of shape {:?}, expected (B, 3, {r}, {r})",
+                image.dims(),
+                r = self.resolution
+            );
+        }
+        if omega.dims4()? != (b, OMEGA_CHANNELS, h, w) {
+            bail!(
+                "discriminator: ω of shape {:?} does not match the image {:?}",
+                omega.dims(),
+                image.dims()
+            );
+        }
+        let mut x = Tensor::cat(&[image, omega], 1)?;
+        for block in &self.blocks {
+            x = block.forward(&x)?;
+        }
+        let x = minibatch_stddev(&x, self.mbstd_group_size, self.mbstd_channels)?;
+        let x = self.conv.forward(&x)?;
+        let x = lrelu(&self.fc.forward(&x.flatten_from(1)?)?)?;
+        self.out.forward(&x)
+    }
+}
+
+/// Appends the minibatch standard deviation channels (see the module docs).
+///
+/// # Shapes
+/// (B, C, H, W) → (B, C + channels, H, W); C must be a multiple of `channels`.
+pub fn minibatch_stddev(x: &Tensor, group_size: usize, channels: usize) -> Result<Tensor> {
+    let (b, c, h, w) = x.dims4()?;
+    if group_size == 0 || channels == 0 || c % channels != 0 {
+        bail!("minibatch stddev: group {group_size}, {channels} channels for {c} features");
+    }
+    let groups = b.div_ceil(group_size.min(b));
+    // Samples of group m: m, m + groups, m + 2·groups, … (narrow + cat: exact second
+    // derivatives, DESIGN §6).
+    let members = |m: usize| -> Result<Tensor> {
+        let parts = (m..b)
+            .step_by(groups)
+            .map(|n| x.narrow(0, n, 1))
+            .collect::<Result<Vec<_>>>()?;
+        Tensor::cat(&parts, 0)
+    };
+    let mut stats = Vec::with_capacity(groups);
+    for m in 0..groups {
+        let y = members(m)?.reshape(((), channels, c / channels, h, w))?; // (g, F, c/F, H, W)
+        let centred = y.broadcast_sub(&y.mean_keepdim(0)?)?;
+        let std = (centred.sqr()?.mean(0)? + MBSTD_EPS)?.sqrt()?; // (F, c/F, H, W)
+        stats.push(std.reshape((channels, ()))?.mean(D::Minus1)?.unsqueeze(0)?); // (1, F)
+    }
+    let per_sample = (0..b)
+        .map(|n| stats[n % groups].clone())
+        .collect::<Vec<_>>();
+    let s = Tensor::cat(&per_sample, 0)?
+        .reshape((b, channels, 1, 1))?
+        .broadcast_as((b, channels, h, w))?;
+    Tensor::cat(&[x, &s.contiguous()?], 1)
+}
+
+impl Discriminator {
+    /// The R1 penalty of StyleGAN2 (Mescheder et al. 2018, eq. 9): per sample, the squared
+    /// norm of the gradient of D's logit with respect to the image, `‖∇ₓ D(x, ω)‖²`, ω held
+    /// fixed. The result keeps its graph so that its gradient reaches D's parameters (the
+    /// trainer applies γ/2 and the batch mean).
+    ///
+    /// This is a double backward: candle 0.11 detaches gradients unless
+    /// `CANDLE_GRAD_DO_NOT_DETACH=1` is set before the thread's first `backward()` (DESIGN §6).
+    /// A detached input gradient is detected here and reported as an error instead of
+    /// returning a penalty whose parameter gradient would silently be zero.
+    ///
+    /// # Shapes
+    /// image (B, 3, R, R), omega (B, 3, R, R) → (B).
+    pub fn r1_penalty(&self, image: &Tensor, omega: &Tensor) -> Result<Tensor> {
+        let x = candle_core::Var::from_tensor(&image.detach())?;
+        let logits = self.forward(x.as_tensor(), omega)?;
+        let grads = logits.sum_all()?.backward()?;
+        let Some(gx) = grads.get(x.as_tensor()) else {
+            bail!("R1 penalty: the logits do not depend on the image");
+        };
+        if !gx.track_op() {
+            bail!(
+                "R1 penalty: candle detached the input gradient, so the penalty would have no \
+                 gradient; set CANDLE_GRAD_DO_NOT_DETACH=1 in the environment before the \
+                 thread's first backward()"
+            );
+        }
+        gx.sqr()?.flatten_from(1)?.sum(1)
+    }
+}

@@ -1,0 +1,290 @@
+//! # photomat-generator
+//!
+//! The relightable generator of PhotoMat (Zhou et al., SIGGRAPH 2023), §3 "Relightable
+//! generator" and §4 "Implementation", with the architecture facts of the reference code
+//! recorded in DESIGN §4:
+//!
+//! - **G** ([`Generator`]): a StyleGAN2 generator (Karras et al. 2020, "Analyzing and Improving
+//!   the Image Quality of StyleGAN", config F / StyleGAN2-ADA code) whose output is a 32-channel
+//!   *neural material* F instead of an RGB image: [`mapping`] (z → w), [`synthesis`] (skip
+//!   architecture of [`modulated_conv`] layers with [`noise`], summed "toFeature" layers
+//!   upsampled with the [`fir`] filter). Optionally **tileable**: circular padding in every conv
+//!   and in the upsampling path, so that F is exactly periodic (TileGen's strategy).
+//! - **M** ([`Relight`], [`relight`]): the per-texel relighting MLP, F ‖ ω → RGB.
+//! - **D** ([`Discriminator`], [`discriminator`]): the StyleGAN2 residual discriminator on
+//!   RGB ‖ ω (6 channels).
+//!
+//! Every weight is an equalised-learning-rate parameter ([`equalized`]). Parameters live in a
+//! candle [`VarMap`](candle_nn::VarMap) under the `vb.pp(..)` prefixes documented per module;
+//! [`checkpoint`] saves and loads them as safetensors, rejecting checkpoints of another
+//! architecture with the mismatching tensor named.
+//!
+//! Only candle ops whose first *and* second derivatives are exact in candle 0.11 are used
+//! (DESIGN §6): no `upsample_nearest2d`, pooling, `scatter_add` or fused norms; FIR filtering is
+//! done with banded-matrix products, padding with `narrow` + `cat`, LeakyReLU with `relu` and
+//! affine ops. The R1 penalty's gradient through D therefore only needs
+//! `CANDLE_GRAD_DO_NOT_DETACH=1` (verified by `tests/r1_gradient.rs`).
+//!
+//! ```no_run
+//! use candle_core::{DType, Device, Tensor};
+//! use candle_nn::{VarBuilder, VarMap};
+//! use photomat_generator::{Generator, GeneratorConfig, NoiseInput, Relight};
+//!
+//! # fn main() -> candle_core::Result<()> {
+//! let cfg = GeneratorConfig { resolution: 64, channel_multiplier: 0.25, ..Default::default() };
+//! let vars = VarMap::new();
+//! let vb = VarBuilder::from_varmap(&vars, DType::F32, &Device::Cpu);
+//! let g = Generator::new(&cfg, vb.pp("g"))?;
+//! let m = Relight::new(&cfg, vb.pp("m"))?;
+//! let z = Tensor::randn(0f32, 1., (2, cfg.latent_dim), &Device::Cpu)?;
+//! let features = g.forward(&z, 1.0, &NoiseInput::Random)?; // (2, 32, 64, 64)
+//! let omega = Tensor::ones((2, 3, 64, 64), DType::F32, &Device::Cpu)?; // per-texel ω in practice
+//! let rgb = m.forward(&features, &omega)?; // (2, 3, 64, 64), encoded space [−1, 1]
+//! # Ok(()) }
+//! ```
+
+pub mod activation;
+pub mod checkpoint;
+pub mod discriminator;
+pub mod equalized;
+pub mod fir;
+pub mod mapping;
+pub mod modulated_conv;
+pub mod noise;
+pub mod padding;
+pub mod relight;
+pub mod synthesis;
+
+pub use checkpoint::{
+    is_buffer, load_checkpoint, parameter_count, save_checkpoint, trainable_vars,
+};
+pub use discriminator::Discriminator;
+pub use mapping::{Mapping, mix_styles};
+pub use noise::NoiseInput;
+pub use relight::Relight;
+pub use synthesis::{Generator, Synthesis};
+
+use candle_core::{Result, bail};
+
+/// Smallest output resolution (the paper trains 256² … 1024²; 32² keeps tests and CPU runs
+/// small while still having the 4² … 32² block structure).
+pub const MIN_RESOLUTION: usize = 32;
+/// Largest output resolution (the paper's largest model).
+pub const MAX_RESOLUTION: usize = 1024;
+/// Resolution of the learned constant input and of D's epilogue (StyleGAN2).
+pub const BASE_RESOLUTION: usize = 4;
+/// Channel cap of the channel table (StyleGAN2 `channel_max`).
+pub const MAX_CHANNELS: usize = 512;
+
+/// Architecture of G, M and D. The defaults are the reference configuration of DESIGN §4 at
+/// 256² (channel multiplier 1); CPU users shrink `channel_multiplier` and `resolution`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GeneratorConfig {
+    /// Side of F, of M's images and of D's input: a power of two in 32 … 1024. Default 256.
+    pub resolution: usize,
+    /// Scales every entry of the channel table (see [`GeneratorConfig::channels_at`]).
+    /// Default 1 (the reference); e.g. ¼ for CPU training.
+    pub channel_multiplier: f64,
+    /// Fully connected layers of the mapping network. Default 2 (the reference; StyleGAN2 uses 8).
+    pub mapping_depth: usize,
+    /// Circular padding in every conv and in the upsampling path of G, so that F is exactly
+    /// periodic. D is never tileable (it sees real crops). Default false.
+    pub tileable: bool,
+    /// Dimension of z and w. Default 512.
+    pub latent_dim: usize,
+    /// Channels of the neural material F (the toFeature outputs). Default 32.
+    pub feature_channels: usize,
+    /// Learning-rate multiplier of the mapping layers. Default 0.01.
+    pub mapping_lr_multiplier: f64,
+    /// Decay of the tracked w average per training step. Default 0.995.
+    pub w_avg_beta: f64,
+    /// Width of M's hidden layers. Default 64.
+    pub relight_hidden: usize,
+    /// Fully connected layers of M (the last one linear). Default 8.
+    pub relight_layers: usize,
+    /// Learning-rate multiplier of every layer of M. Default 0.01.
+    pub relight_lr_multiplier: f64,
+    /// Largest group of D's minibatch-stddev layer. Default 4.
+    pub mbstd_group_size: usize,
+    /// Feature channels of D's minibatch-stddev statistic. Default 1.
+    pub mbstd_channels: usize,
+}
+
+impl Default for GeneratorConfig {
+    fn default() -> Self {
+        Self {
+            resolution: 256,
+            channel_multiplier: 1.0,
+            mapping_depth: 2,
+            tileable: false,
+            latent_dim: 512,
+            feature_channels: 32,
+            mapping_lr_multiplier: 0.01,
+            w_avg_beta: 0.995,
+            relight_hidden: 64,
+            relight_layers: 8,
+            relight_lr_multiplier: 0.01,
+            mbstd_group_size: 4,
+            mbstd_channels: 1,
+        }
+    }
+}
+
+impl GeneratorConfig {
+    /// Checks every field; the error names the field, its value and what is accepted.
+    pub fn validate(&self) -> Result<()> {
+        let r = self.resolution;
+        if !r.is_power_of_two() || !(MIN_RESOLUTION..=MAX_RESOLUTION).contains(&r) {
+            bail!(
+                "resolution {r} is not supported: use a power of two in {MIN_RESOLUTION} … {MAX_RESOLUTION}"
+            );
+        }
+        if !(self.channel_multiplier.is_finite() && self.channel_multiplier > 0.0) {
+            bail!(
+                "channel multiplier {} must be positive and finite",
+                self.channel_multiplier
+            );
+        }
+        if self.mapping_depth == 0 {
+            bail!("mapping depth must be at least 1");
+        }
+        if self.relight_layers < 2 {
+            bail!(
+                "relight MLP needs at least 2 layers, got {}",
+                self.relight_layers
+            );
+        }
+        for (name, v) in [
+            ("latent_dim", self.latent_dim),
+            ("feature_channels", self.feature_channels),
+            ("relight_hidden", self.relight_hidden),
+            ("mbstd_group_size", self.mbstd_group_size),
+            ("mbstd_channels", self.mbstd_channels),
+        ] {
+            if v == 0 {
+                bail!("{name} must be at least 1");
+            }
+        }
+        for (name, v) in [
+            ("mapping_lr_multiplier", self.mapping_lr_multiplier),
+            ("relight_lr_multiplier", self.relight_lr_multiplier),
+        ] {
+            if !(v.is_finite() && v > 0.0) {
+                bail!("{name} {v} must be positive and finite");
+            }
+        }
+        if !(0.0..1.0).contains(&self.w_avg_beta) {
+            bail!("w_avg_beta {} must be in [0, 1)", self.w_avg_beta);
+        }
+        Ok(())
+    }
+
+    /// Channel count of G's block and D's block at resolution `res` (DESIGN §4):
+    /// `max(1, round(min(C / res, 512) · channel_multiplier))` with C = 16384 for models below
+    /// 512² and 32768 at 512² and above (so 512 up to 32², 256 at 64², 128 at 128², 64 at 256²
+    /// for a 256² model). Rounding to nearest keeps e.g. multiplier ¼ exact on the table's
+    /// powers of two; the floor of 1 keeps tiny test configurations valid.
+    pub fn channels_at(&self, res: usize) -> usize {
+        let base = if self.resolution >= 512 { 32768 } else { 16384 };
+        let full = (base / res).min(MAX_CHANNELS) as f64;
+        ((full * self.channel_multiplier).round() as usize).max(1)
+    }
+
+    /// Number of block resolutions 4², 8², …, R² (log₂ R − 1).
+    pub fn num_blocks(&self) -> usize {
+        (self.resolution.trailing_zeros() - BASE_RESOLUTION.trailing_zeros() + 1) as usize
+    }
+
+    /// Number of per-layer w vectors the synthesis network consumes: one per modulated conv
+    /// plus the last toFeature layer (StyleGAN2: 2·log₂ R − 2; 8 at 32², 14 at 256²).
+    pub fn num_ws(&self) -> usize {
+        2 * self.num_blocks()
+    }
+}
+
+/// Deterministic pseudo-random tensors for tests and examples (candle's CPU generator cannot be
+/// seeded): values uniform in [−1, 1) from a SplitMix64 stream, scaled by √3 so that their
+/// variance is 1 like a standard normal's.
+pub fn seeded_uniform(
+    shape: impl Into<candle_core::Shape>,
+    seed: u64,
+    dtype: candle_core::DType,
+    device: &candle_core::Device,
+) -> Result<candle_core::Tensor> {
+    let shape = shape.into();
+    let mut state = seed;
+    let values: Vec<f64> = (0..shape.elem_count())
+        .map(|_| {
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            ((z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) * 3f64.sqrt()
+        })
+        .collect();
+    candle_core::Tensor::from_vec(values, shape, device)?.to_dtype(dtype)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn channel_table_matches_design() {
+        let cfg = GeneratorConfig::default();
+        let table: Vec<usize> = [4, 8, 16, 32, 64, 128, 256]
+            .iter()
+            .map(|&r| cfg.channels_at(r))
+            .collect();
+        assert_eq!(table, [512, 512, 512, 512, 256, 128, 64]);
+        let big = GeneratorConfig {
+            resolution: 1024,
+            ..Default::default()
+        };
+        assert_eq!(big.channels_at(64), 512);
+        assert_eq!(big.channels_at(512), 64);
+        assert_eq!(big.channels_at(1024), 32);
+        let quarter = GeneratorConfig {
+            channel_multiplier: 0.25,
+            ..Default::default()
+        };
+        assert_eq!(quarter.channels_at(64), 64);
+        let tiny = GeneratorConfig {
+            channel_multiplier: 1e-4,
+            ..Default::default()
+        };
+        assert_eq!(tiny.channels_at(4), 1);
+        assert_eq!(cfg.num_ws(), 14);
+    }
+
+    #[test]
+    fn config_rejects_bad_values() {
+        let bad = [
+            GeneratorConfig {
+                resolution: 48,
+                ..Default::default()
+            },
+            GeneratorConfig {
+                resolution: 16,
+                ..Default::default()
+            },
+            GeneratorConfig {
+                channel_multiplier: 0.0,
+                ..Default::default()
+            },
+            GeneratorConfig {
+                mapping_depth: 0,
+                ..Default::default()
+            },
+            GeneratorConfig {
+                w_avg_beta: 1.0,
+                ..Default::default()
+            },
+        ];
+        for cfg in bad {
+            assert!(cfg.validate().is_err(), "{cfg:?}");
+        }
+        assert!(GeneratorConfig::default().validate().is_ok());
+    }
+}

@@ -1,0 +1,112 @@
+//! Spatial padding of NCHW tensors: zeros (StyleGAN2) or wrap-around (tileable G).
+//!
+//! The tileable generator follows TileGen (Zhou et al. 2022), which PhotoMat uses for its
+//! tileable F (paper §4 "Implementation"): every convolution pads its input by wrapping around
+//! (PyTorch `padding_mode='circular'`), so each feature map is one period of an infinite
+//! periodic image and the network commutes with rolls. This is the same operation as
+//! `photomat_estimator::circular_pad2d` (kept local so the generator does not depend on the
+//! estimator crate), built from `narrow` + `cat`, whose first and second derivatives are exact
+//! in candle 0.11 (DESIGN §6). Zero padding uses candle's `pad_with_zeros` (also exact).
+
+use candle_core::{Result, Tensor, bail};
+
+/// How a layer extends its input beyond the border.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Padding {
+    /// Zeros outside the image (StyleGAN2).
+    Zeros,
+    /// Wrap-around: the texel left of column 0 is column W − 1 (tileable G).
+    Circular,
+}
+
+impl Padding {
+    /// `Circular` when `tileable`, `Zeros` otherwise.
+    pub fn for_tileable(tileable: bool) -> Self {
+        if tileable {
+            Self::Circular
+        } else {
+            Self::Zeros
+        }
+    }
+}
+
+/// Pads dimension `dim` with `before` elements in front and `after` behind.
+///
+/// # Shapes
+/// Any rank; `dim` of size S becomes `before + S + after`. Circular pads must be ≤ S.
+pub fn pad_dim(
+    x: &Tensor,
+    dim: usize,
+    before: usize,
+    after: usize,
+    mode: Padding,
+) -> Result<Tensor> {
+    if before == 0 && after == 0 {
+        return Ok(x.clone());
+    }
+    match mode {
+        Padding::Zeros => x.pad_with_zeros(dim, before, after),
+        Padding::Circular => {
+            let size = x.dim(dim)?;
+            if before > size || after > size {
+                bail!(
+                    "circular padding ({before}, {after}) exceeds the size {size} of dim {dim}: \
+                     pads may be at most one period"
+                );
+            }
+            let mut parts = Vec::with_capacity(3);
+            if before > 0 {
+                parts.push(x.narrow(dim, size - before, before)?);
+            }
+            parts.push(x.clone());
+            if after > 0 {
+                parts.push(x.narrow(dim, 0, after)?);
+            }
+            Tensor::cat(&parts, dim)
+        }
+    }
+}
+
+/// Pads both spatial dimensions by `pad` on every side.
+///
+/// # Shapes
+/// (B, C, H, W) → (B, C, H + 2·pad, W + 2·pad).
+pub fn pad2d(x: &Tensor, pad: usize, mode: Padding) -> Result<Tensor> {
+    let (_b, _c, _h, _w) = x.dims4()?;
+    let x = pad_dim(x, 2, pad, pad, mode)?;
+    pad_dim(&x, 3, pad, pad, mode)
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{DType, Device};
+
+    use super::*;
+
+    #[test]
+    fn pad2d_wraps_or_zeros_the_border() -> Result<()> {
+        let x = Tensor::arange(0f32, 6., &Device::Cpu)?.reshape((1, 1, 2, 3))?;
+        let c = pad2d(&x, 1, Padding::Circular)?;
+        assert_eq!(
+            c.flatten_all()?.to_vec1::<f32>()?,
+            [
+                5., 3., 4., 5., 3., //
+                2., 0., 1., 2., 0., //
+                5., 3., 4., 5., 3., //
+                2., 0., 1., 2., 0.,
+            ]
+        );
+        let z = pad2d(&x, 1, Padding::Zeros)?;
+        assert_eq!(z.dims4()?, (1, 1, 4, 5));
+        assert_eq!(z.sum_all()?.to_scalar::<f32>()?, 15.0);
+        assert!(
+            pad2d(
+                &Tensor::zeros((1, 1, 2, 2), DType::F32, &Device::Cpu)?,
+                3,
+                Padding::Circular
+            )
+            .is_err()
+        );
+        Ok(())
+    }
+}
