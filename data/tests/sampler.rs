@@ -296,3 +296,58 @@ fn sampler_errors_name_the_missing_photo() {
             .is_err()
     );
 }
+
+#[test]
+fn sampler_crops_a_prepared_simulation() {
+    use photomat_data::dataset::{PrepareOptions, prepare};
+    use photomat_data::procedural::families;
+    use photomat_data::simulator::{
+        CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig, simulate,
+    };
+    // simulate → prepare (resize 64 → 32, truth carried over) → crops of a model of size 8
+    // (photos resized again, 32 → 16).
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, data) = (dir.path().join("sim"), dir.path().join("data"));
+    let all = families();
+    let config = SimulationConfig {
+        count: 4,
+        size: 64,
+        seed: 2,
+        format: PhotoFormat::Jpeg,
+        families: all.iter().take(4).map(|f| f.as_ref()).collect(),
+        camera: CameraSource::Phone(PhoneCamera::default()),
+        jitter: HighlightJitter::default(),
+    };
+    let record = simulate(&sim, &config, false, &|| {}).unwrap();
+    let options = PrepareOptions {
+        size: 32,
+        progress: false,
+        ..PrepareOptions::default()
+    };
+    prepare(&sim.join("photos"), &data, &options).unwrap();
+    let dataset = FlashDataset::open(&data).unwrap();
+    assert_eq!((dataset.len(), dataset.size()), (4, 32));
+    // The index carries the simulator's truth, scaled to the prepared size.
+    for (entry, truth) in dataset.photos().iter().zip(&record.photos) {
+        let t = entry
+            .truth_highlight_px
+            .expect("prepare found simulation.json");
+        assert!((t[0] - truth.highlight_px[0] / 2.0).abs() < 1e-9, "{t:?}");
+        assert!((t[1] - truth.highlight_px[1] / 2.0).abs() < 1e-9, "{t:?}");
+    }
+    let batch = CropSampler::new(8, 1)
+        .unwrap()
+        .sample(&dataset, 6, &Device::Cpu)
+        .unwrap();
+    assert_eq!(batch.images.dims(), &[6, 3, 8, 8]);
+    assert!(
+        to_vec(&batch.images)
+            .iter()
+            .all(|v| (-1.0..=1.0).contains(v))
+    );
+    // Highlights near the photo centre land within the crop or just beyond its edge: the
+    // crop's centre is at most ½ from the photo's, the highlight a few % of the width from it.
+    for h in LightSampler::new(&dataset, 8, 1).unwrap().sample(64) {
+        assert!(h.x.abs() < 0.8 && h.y.abs() < 0.8, "{h:?}");
+    }
+}
