@@ -16,22 +16,22 @@ impl PeriodicNoise {
         Self { seed }
     }
 
-    /// Lattice value in [−1, 1] at integer cell (i, j) of a `period`-periodic lattice.
-    fn lattice(&self, i: i64, j: i64, period: i64, octave: u64) -> f64 {
-        let (i, j) = (i.rem_euclid(period) as u64, j.rem_euclid(period) as u64);
-        // SplitMix64 finaliser over the packed coordinates: a well-mixed 64-bit hash.
-        let mut z = self.seed ^ (octave << 48) ^ (i << 24) ^ j;
-        z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    /// Lattice value in [−1, 1] at integer cell (i, j) of a lattice with `px` × `py` cells.
+    fn lattice(&self, i: i64, j: i64, (px, py): (i64, i64), octave: u64) -> f64 {
+        let (i, j) = (i.rem_euclid(px) as u64, j.rem_euclid(py) as u64);
+        unit_f64(mix64(self.seed ^ (octave << 48) ^ (i << 24) ^ j)) * 2.0 - 1.0
     }
 
     /// Noise in [−1, 1] at (x, y) with `period` lattice cells per unit.
     pub fn value(&self, x: f64, y: f64, period: u32, octave: u64) -> f64 {
-        let p = period.max(1) as i64;
-        let (fx, fy) = (x * p as f64, y * p as f64);
+        self.value_xy(x, y, (period, period), octave)
+    }
+
+    /// Anisotropic noise in [−1, 1] at (x, y) with `px` lattice cells per unit along x and `py`
+    /// along y: `px ≫ py` gives streaks along y. Equals [`Self::value`] when `px == py`.
+    pub fn value_xy(&self, x: f64, y: f64, (px, py): (u32, u32), octave: u64) -> f64 {
+        let p = (px.max(1) as i64, py.max(1) as i64);
+        let (fx, fy) = (x * p.0 as f64, y * p.1 as f64);
         let (i, j) = (fx.floor() as i64, fy.floor() as i64);
         let (tx, ty) = (fade(fx - i as f64), fade(fy - j as f64));
         let v00 = self.lattice(i, j, p, octave);
@@ -54,6 +54,30 @@ impl PeriodicNoise {
         }
         sum / norm
     }
+
+    /// Anisotropic fBm: [`Self::fbm`] with `(px, py)` cells per unit in the first octave.
+    pub fn fbm_xy(&self, x: f64, y: f64, (px, py): (u32, u32), octaves: u32) -> f64 {
+        let (mut sum, mut norm, mut amp) = (0.0, 0.0, 1.0);
+        for o in 0..octaves {
+            sum += amp * self.value_xy(x, y, (px << o, py << o), o as u64);
+            norm += amp;
+            amp *= 0.5;
+        }
+        sum / norm
+    }
+}
+
+/// SplitMix64 finaliser (Steele et al. 2014): a well-mixed 64-bit hash of `z`.
+pub(crate) fn mix64(z: u64) -> u64 {
+    let mut z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// The top 53 bits of a hash as a uniform value in [0, 1).
+pub(crate) fn unit_f64(h: u64) -> f64 {
+    (h >> 11) as f64 / (1u64 << 53) as f64
 }
 
 /// Quintic fade 6t⁵ − 15t⁴ + 10t³.
@@ -76,6 +100,35 @@ mod tests {
                 assert!((n.fbm(x + dx, y + dy, 3, 4) - v).abs() < 1e-12);
             }
         }
+    }
+
+    #[test]
+    fn anisotropic_noise_is_periodic_and_matches_isotropic() {
+        let n = PeriodicNoise::new(11);
+        for k in 0..200 {
+            let (x, y) = ((k as f64 * 0.173) % 1.0, (k as f64 * 0.377) % 1.0);
+            assert_eq!(n.value_xy(x, y, (5, 5), 2), n.value(x, y, 5, 2));
+            let v = n.fbm_xy(x, y, (24, 3), 3);
+            assert!((-1.0..=1.0).contains(&v));
+            for (dx, dy) in [(1.0, 0.0), (0.0, 1.0), (-3.0, 2.0)] {
+                assert!((n.fbm_xy(x + dx, y + dy, (24, 3), 3) - v).abs() < 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn anisotropic_noise_varies_faster_along_the_denser_axis() {
+        // 32 cells per unit along x, 2 along y: mean |Δ| over a step of 1/64 is much larger
+        // along x (half a cell) than along y (1/32 of a cell).
+        let n = PeriodicNoise::new(5);
+        let (mut along_x, mut along_y) = (0.0, 0.0);
+        for k in 0..400 {
+            let (x, y) = ((k as f64 * 0.0137) % 1.0, (k as f64 * 0.0291) % 1.0);
+            let v = n.value_xy(x, y, (32, 2), 0);
+            along_x += (n.value_xy(x + 1.0 / 64.0, y, (32, 2), 0) - v).abs();
+            along_y += (n.value_xy(x, y + 1.0 / 64.0, (32, 2), 0) - v).abs();
+        }
+        assert!(along_x > 4.0 * along_y, "{along_x} vs {along_y}");
     }
 
     #[test]

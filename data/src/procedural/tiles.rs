@@ -4,12 +4,13 @@
 //! Maps for `height(ggx)`: diffuse, specular, roughness, height. Exactly periodic on the unit
 //! square (integer tile count, periodic noise), so the material tiles seamlessly.
 
-use candle_core::{Device, Tensor};
+use candle_core::Device;
 use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
 use super::Family;
+use super::common::{GgxTexel, Pattern, sample_maps, smoothstep, wrap01};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the tile family; every field has a documented default.
@@ -36,18 +37,17 @@ impl Default for GlazedTiles {
     }
 }
 
-/// Hermite smoothstep on [e0, e1].
-fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
-    let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
-    t * t * (3.0 - 2.0 * t)
+/// One member of the family.
+struct Tiling {
+    config: GlazedTiles,
+    n: usize,
+    tile_colour: Vec<[f64; 3]>,
+    grout_grey: f64,
+    noise: PeriodicNoise,
 }
 
-impl Family for GlazedTiles {
-    fn brdf(&self) -> String {
-        format!("height(ggx, scale={})", self.relief)
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
+impl GlazedTiles {
+    fn member(&self, seed: u64) -> Tiling {
         let n = self.tiles_per_side.max(1) as usize;
         let mut rng = StdRng::seed_from_u64(seed);
         // One glaze per family member, jittered per tile.
@@ -59,57 +59,71 @@ impl Family for GlazedTiles {
         let tile_colour: Vec<[f64; 3]> = (0..n * n)
             .map(|_| {
                 let k: f64 = rng.random_range(0.8..1.2);
+                // 0.8 · 1.2 < 1: the clamp never binds, it documents the albedo range.
                 base.map(|c: f64| (c * k).clamp(0.0, 1.0))
             })
             .collect();
         let grout_grey: f64 = rng.random_range(0.25..0.6);
-        let noise = PeriodicNoise::new(seed.wrapping_mul(0x9E37_79B9));
-
-        let plane = size * size;
-        let (mut diffuse, mut specular) = (vec![0f32; 3 * plane], vec![0f32; 3 * plane]);
-        let (mut roughness, mut height) = (vec![0f32; plane], vec![0f32; plane]);
-        for row in 0..size {
-            for col in 0..size {
-                // Texture coordinates of the texel centre, u right, v down, in [0, 1).
-                let (u, v) = (
-                    (col as f64 + 0.5) / size as f64,
-                    (row as f64 + 0.5) / size as f64,
-                );
-                let (tu, tv) = (u * n as f64, v * n as f64);
-                let (ti, tj) = (tv.floor() as usize % n, tu.floor() as usize % n);
-                let (fu, fv) = (tu.fract(), tv.fract());
-                let edge = fu.min(1.0 - fu).min(fv).min(1.0 - fv); // distance to the tile border
-                let half_grout = self.grout_width / 2.0;
-                let on_tile = smoothstep(half_grout, half_grout + self.bevel_width, edge);
-                let grain = noise.fbm(u, v, 8, 4);
-                let wave = noise.fbm(u, v, 2, 2);
-                let t = row * size + col;
-                let colour = tile_colour[ti * n + tj];
-                for c in 0..3 {
-                    let tile = colour[c] * (1.0 + 0.08 * grain);
-                    let grout = grout_grey * (1.0 + 0.25 * grain);
-                    diffuse[c * plane + t] =
-                        (grout + (tile - grout) * on_tile).clamp(0.0, 1.0) as f32;
-                    specular[c * plane + t] = (0.02 + 0.03 * on_tile) as f32;
-                }
-                roughness[t] =
-                    (0.85 + (0.15 + 0.05 * grain - 0.85) * on_tile).clamp(0.0, 1.0) as f32;
-                let h = 0.3 + 0.05 * grain + on_tile * (0.55 + 0.05 * wave);
-                height[t] = h.clamp(0.0, 1.0) as f32;
-            }
+        Tiling {
+            config: self.clone(),
+            n,
+            tile_colour,
+            grout_grey,
+            noise: PeriodicNoise::new(seed.wrapping_mul(0x9E37_79B9)),
         }
-        let map = |data: Vec<f32>, c: usize| Tensor::from_vec(data, (1, c, size, size), device);
-        Ok(MaterialMaps::new()
-            .with("diffuse", map(diffuse, 3)?)
-            .with("specular", map(specular, 3)?)
-            .with("roughness", map(roughness, 1)?)
-            .with("height", map(height, 1)?))
+    }
+}
+
+impl Pattern for Tiling {
+    type Texel = GgxTexel;
+
+    fn sample(&self, u: f64, v: f64) -> GgxTexel {
+        let n = self.n;
+        let (tu, tv) = (u * n as f64, v * n as f64);
+        let (ti, tj) = (
+            tv.floor().rem_euclid(n as f64) as usize,
+            tu.floor().rem_euclid(n as f64) as usize,
+        );
+        let (fu, fv) = (wrap01(tu), wrap01(tv));
+        let edge = fu.min(1.0 - fu).min(fv).min(1.0 - fv); // distance to the tile border
+        let half_grout = self.config.grout_width / 2.0;
+        let on_tile = smoothstep(half_grout, half_grout + self.config.bevel_width, edge);
+        let grain = self.noise.fbm(u, v, 8, 4);
+        let wave = self.noise.fbm(u, v, 2, 2);
+        let colour = self.tile_colour[ti * n + tj];
+        let grout = self.grout_grey * (1.0 + 0.25 * grain);
+        let diffuse = colour.map(|c| {
+            let tile = c * (1.0 + 0.08 * grain);
+            grout + (tile - grout) * on_tile
+        });
+        GgxTexel {
+            diffuse,
+            specular: [0.02 + 0.03 * on_tile; 3],
+            roughness: 0.85 + (0.15 + 0.05 * grain - 0.85) * on_tile,
+            height: 0.3 + 0.05 * grain + on_tile * (0.55 + 0.05 * wave),
+        }
+    }
+}
+
+impl Family for GlazedTiles {
+    fn name(&self) -> &'static str {
+        "tiles"
+    }
+
+    fn brdf(&self) -> String {
+        format!("height(ggx, scale={})", self.relief)
+    }
+
+    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
+        sample_maps(&self.member(seed), size, device)
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::procedural::common::testing::assert_periodic;
+    use candle_core::Tensor;
     use photomat_brdfs as _;
 
     fn maps(seed: u64) -> MaterialMaps {
@@ -139,6 +153,13 @@ mod tests {
             flat(a.get("diffuse").unwrap()),
             flat(maps(4).get("diffuse").unwrap())
         );
+    }
+
+    #[test]
+    fn tiles_are_periodic() {
+        for seed in 0..4 {
+            assert_periodic(&GlazedTiles::default().member(seed));
+        }
     }
 
     #[test]
