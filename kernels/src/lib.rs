@@ -8,12 +8,14 @@
 //! - [`conv2d_fast_backward`]: unpadded strided `conv2d` whose input gradient is a polyphase
 //!   `conv2d` instead of candle's slow direct-loop `conv_transpose2d` ([`conv_grad`]).
 //! - [`leaky_relu`]: LeakyReLU as one fused element-wise pass each way ([`activation`]).
+//! - [`alloc`]: the global allocator (mimalloc, opt-in feature) and thread count binaries use.
 //! - [`testing`]: seeded pseudo-random tensors and comparisons for tests and benchmarks.
 //!
 //! Conventions follow DESIGN §2: NCHW tensors, f32 for training (f64 accepted by every op so
 //! that gradient tests can be tight).
 
 pub mod activation;
+pub mod alloc;
 pub mod conv_grad;
 pub mod testing;
 
