@@ -21,7 +21,7 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
 use super::Family;
-use super::common::{GgxTexel, Pattern, Streaks, sample_maps, scale, smoothstep};
+use super::common::{GgxTexel, Pattern, Streaks, counts, sample_maps, scale, smoothstep};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the brushed-metal family; every field has a documented default.
@@ -74,16 +74,13 @@ struct Sheet {
 impl BrushedMetal {
     fn member(&self, seed: u64) -> Sheet {
         let mut rng = StdRng::seed_from_u64(seed);
-        let (lo, hi) = (
-            self.grooves.0.max(8),
-            self.grooves.1.max(self.grooves.0.max(8)),
-        );
         let f0 = METALS[rng.random_range(0..METALS.len())];
         Sheet {
             // Alloys and surface oxide shift the measured F0 a little.
             f0: scale(f0, rng.random_range(0.95..1.0)),
             streaks: Streaks::random(&mut rng),
-            grooves: rng.random_range(lo..=hi),
+            // At least 8 grooves: the broad bands use an eighth of the groove count as their period.
+            grooves: rng.random_range(counts(self.grooves, 8)),
             roughness: rng.random_range(0.05..0.22),
             bands: rng.random_range(0.03..0.1),
             scratches: rng.random_range(6..24),

@@ -22,7 +22,7 @@ use rand::{Rng, SeedableRng};
 
 use super::Family;
 use super::cellular::PeriodicCells;
-use super::common::{CoatedTexel, Pattern, hsv, sample_maps, scale, srgb};
+use super::common::{CoatedTexel, Pattern, counts, hsv, sample_maps, scale, srgb};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the car-paint family; every field has a documented default.
@@ -83,10 +83,6 @@ impl CarPaint {
             let pigment = srgb(hsv(hue, saturation, rng.random_range(0.2..0.9)));
             (pigment, [rng.random_range(0.0..0.02); 3], 0.0)
         };
-        let (lo, hi) = (
-            self.flakes.0.max(1),
-            self.flakes.1.max(self.flakes.0.max(1)),
-        );
         Panel {
             pigment,
             flake,
@@ -94,7 +90,7 @@ impl CarPaint {
             glint_gain: rng.random_range(1.0..2.0),
             flake_roughness: rng.random_range(0.25..0.45),
             cells: PeriodicCells::new(rng.random(), 1.0),
-            flakes: rng.random_range(lo..=hi),
+            flakes: rng.random_range(counts(self.flakes, 1)),
             coat_f0: rng.random_range(0.04..0.05),
             coat_roughness: rng.random_range(0.02..0.07),
             noise: PeriodicNoise::new(rng.random()),

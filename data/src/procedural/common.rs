@@ -134,6 +134,14 @@ pub(crate) fn sample_maps<P: Pattern>(
     Ok(maps)
 }
 
+/// A configured (least, most) count range made safe to draw from: least at least `floor`
+/// (a count below it would leave nothing to draw or a zero period), most at least least (a
+/// reversed range draws the least).
+pub(crate) fn counts((least, most): (u32, u32), floor: u32) -> std::ops::RangeInclusive<u32> {
+    let least = least.max(floor);
+    least..=most.max(least)
+}
+
 /// Hermite smoothstep on [e0, e1] (e0 < e1): 0 below, 1 above, C¹ in between.
 pub(crate) fn smoothstep(e0: f64, e1: f64, x: f64) -> f64 {
     let t = ((x - e0) / (e1 - e0)).clamp(0.0, 1.0);
@@ -179,7 +187,7 @@ pub(crate) fn srgb(c: [f64; 3]) -> [f64; 3] {
 pub(crate) fn hsv(h: f64, s: f64, v: f64) -> [f64; 3] {
     let k = |n: f64| {
         let k = (n + 6.0 * wrap01(h)) % 6.0;
-        v - v * s * k.min(4.0 - k).clamp(0.0, 1.0)
+        v - v * s * k.min(4.0 - k).clamp(0.0, 1.0) // the trapezoid ramp of each channel
     };
     [k(5.0), k(3.0), k(1.0)]
 }
@@ -308,6 +316,14 @@ mod tests {
         assert_eq!(hsv(0.0, 1.0, 1.0), [1.0, 0.0, 0.0]);
         assert_eq!(hsv(1.0 / 3.0, 1.0, 0.5), [0.0, 0.5, 0.0]);
         assert_eq!(hsv(2.0 / 3.0, 0.0, 0.7), [0.7; 3]);
+    }
+
+    #[test]
+    fn counts_are_never_empty_nor_below_the_floor() {
+        assert_eq!(counts((4, 10), 1), 4..=10);
+        assert_eq!(counts((0, 0), 1), 1..=1);
+        assert_eq!(counts((12, 3), 2), 12..=12);
+        assert_eq!(counts((3, 40), 8), 8..=40);
     }
 
     #[test]

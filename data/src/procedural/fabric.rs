@@ -7,7 +7,7 @@
 //! cosine between crossings), has a round cross-section and a twisted-ply texture along its
 //! length, and between threads lies a dark gap. The visible surface at a texel is the higher
 //! of the two threads there. Cloth is a rough dielectric (F0 0.03-0.045, roughness
-//! 0.65-0.9), except satin, whose long smooth floats are silkier (roughness 0.3-0.5).
+//! 0.65-0.9), except satin, whose long smooth floats are silkier (roughness 0.35-0.55).
 //!
 //! Maps for `height(ggx, scale=relief)`: diffuse, specular, roughness, height.
 //! Per seed: weave (plain, twill 2/1, 2/2, 3/1, satin), thread count (a multiple of the
@@ -21,7 +21,7 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
 use super::Family;
-use super::common::{GgxTexel, Pattern, Symmetry, hsv, jitter, mix, sample_maps, scale};
+use super::common::{GgxTexel, Pattern, Symmetry, counts, hsv, jitter, mix, sample_maps, scale};
 use super::common::{smoothstep, srgb, wrap01};
 use super::noise::{PeriodicNoise, mix64, unit_f64};
 
@@ -77,6 +77,13 @@ impl Weave {
     }
 }
 
+/// Height of the gaps between threads, below every thread (threads span 0.24 … 0.99).
+const GAP_HEIGHT: f64 = 0.05;
+
+/// Albedo of a gap relative to the darker thread colour: deep shadow, darker than any lit
+/// thread (thread shading stays above ~0.3 of the colour).
+const GAP_SHADE: f64 = 0.15;
+
 /// One member of the family.
 struct Cloth {
     weave: Weave,
@@ -109,11 +116,9 @@ impl Fabric {
             _ => Weave::Satin,
         };
         let r = weave.repeat();
-        let (lo, hi) = (
-            self.threads.0.max(r),
-            self.threads.1.max(self.threads.0.max(r)),
-        );
-        let threads = r * rng.random_range(lo.div_ceil(r)..=(hi / r).max(lo.div_ceil(r)));
+        // A whole number of repeats, within the configured thread counts where possible.
+        let (least, most) = self.threads;
+        let threads = r * rng.random_range(counts((least.div_ceil(r), most / r), 1));
         let colour = |rng: &mut StdRng| {
             let h = rng.random_range(0.0..1.0);
             srgb(hsv(
@@ -153,7 +158,7 @@ impl Fabric {
                 1.0
             },
             roughness: if satin {
-                rng.random_range(0.3..0.5)
+                rng.random_range(0.35..0.55)
             } else {
                 rng.random_range(0.65..0.88)
             },
@@ -212,7 +217,11 @@ impl Pattern for Cloth {
     fn sample(&self, u: f64, v: f64) -> GgxTexel {
         let (x, y) = self.symmetry.apply(u, v);
         let n = self.threads as f64;
-        let (cx, cy) = (x * n, y * n); // in thread spacings
+        // In thread spacings; threads meander by up to a sixth of a spacing (loose weaving).
+        let (cx, cy) = (
+            x * n + 0.15 * self.noise.fbm(x, y, 3, 2),
+            y * n + 0.15 * self.noise.fbm(y, x, 3, 2),
+        );
         let weave = self.weave;
         // Warp: column j = ⌊cx⌋ along y, crossing weft i; weft: row i = ⌊cy⌋ along x.
         let warp = self.thread(0, cx, cy, |j, i| weave.warp_over(i, j));
@@ -224,16 +233,16 @@ impl Pattern for Cloth {
             (None, None) => None,
         };
         let slub = self.noise.fbm(x, y, 8, 2);
-        let fibre = self.noise.fbm(x, y, 128, 1);
+        let fibre = self.noise.fbm(x, y, 96, 2); // loose fibres, fuzz
         let Some((dir, hit)) = top else {
             // Gap between threads: deep, in shadow, dull.
             let [w, f] = self.colours;
-            let dark = [0, 1, 2].map(|c| 0.3 * w[c].min(f[c]));
+            let dark = [0, 1, 2].map(|c| GAP_SHADE * w[c].min(f[c]));
             return GgxTexel {
                 diffuse: dark,
                 specular: [self.f0; 3],
                 roughness: 0.9,
-                height: 0.05,
+                height: GAP_HEIGHT,
             };
         };
         let dyed = scale(self.colours[dir], 1.0 + self.variation * hit.jitter);
@@ -241,11 +250,11 @@ impl Pattern for Cloth {
         let heathered = mix(dyed, grey, self.heather * smoothstep(-0.3, 0.3, fibre));
         // Lower parts of a thread (diving under a crossing) lie in their neighbours' shadow.
         let occlusion = 0.55 + 0.45 * smoothstep(0.2, 0.9, hit.height);
-        let shade = occlusion * (1.0 + 0.12 * hit.ply + 0.06 * slub);
+        let shade = occlusion * (1.0 + 0.12 * hit.ply + 0.06 * slub + 0.08 * fibre);
         GgxTexel {
             diffuse: scale(heathered, shade),
             specular: [self.f0; 3],
-            roughness: self.roughness + 0.05 * hit.ply + 0.04 * slub,
+            roughness: self.roughness + 0.05 * hit.ply + 0.04 * slub + 0.05 * fibre,
             height: hit.height + 0.03 * hit.ply,
         }
     }
@@ -327,14 +336,30 @@ mod tests {
                 s[6]
             );
             assert!(s[7].2 - s[7].0 > 0.2, "seed {seed}: height {:?}", s[7]);
-            // Where four threads meet (whole multiples of the spacing) there is a gap: the
-            // lowest and darkest texels of the cloth.
-            let n = cloth.threads as f64;
-            let gap = cloth.sample(3.0 / n, 5.0 / n);
+            // Between threads there are gaps: the lowest and darkest texels of the cloth.
+            let texels: Vec<GgxTexel> = (0..4096)
+                .map(|k| cloth.sample(wrap01(k as f64 * 0.7549), wrap01(k as f64 * 0.5698)))
+                .collect();
+            let (gaps, threads): (Vec<_>, Vec<_>) =
+                texels.iter().partition(|t| t.height == GAP_HEIGHT);
+            assert!(!gaps.is_empty(), "seed {seed}: no gaps");
+            let lowest = |ts: &[&GgxTexel], f: &dyn Fn(&GgxTexel) -> f64| {
+                ts.iter().map(|t| f(t)).fold(f64::INFINITY, f64::min)
+            };
+            let highest = |ts: &[&GgxTexel], f: &dyn Fn(&GgxTexel) -> f64| {
+                ts.iter().map(|t| f(t)).fold(f64::NEG_INFINITY, f64::max)
+            };
             assert!(
-                gap.height <= s[7].0 && gap.diffuse[1] <= s[1].0,
+                lowest(&threads, &|t| t.height) > GAP_HEIGHT + 0.1,
                 "seed {seed}"
             );
+            for c in 0..3 {
+                let (thread, gap) = (
+                    lowest(&threads, &|t| t.diffuse[c]),
+                    highest(&gaps, &|t| t.diffuse[c]),
+                );
+                assert!(thread > gap, "seed {seed}: channel {c}: {thread} vs {gap}");
+            }
         }
     }
 }

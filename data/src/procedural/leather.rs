@@ -20,7 +20,9 @@ use rand::{Rng, SeedableRng};
 
 use super::Family;
 use super::cellular::{CellSample, PeriodicCells};
-use super::common::{GgxTexel, Pattern, Symmetry, jitter, sample_maps, scale, smoothstep, srgb};
+use super::common::{
+    GgxTexel, Pattern, Symmetry, counts, jitter, sample_maps, scale, smoothstep, srgb,
+};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the leather family; every field has a documented default.
@@ -77,12 +79,11 @@ struct Hide {
 impl Leather {
     fn member(&self, seed: u64) -> Hide {
         let mut rng = StdRng::seed_from_u64(seed);
-        let (lo, hi) = (self.cells.0.max(1), self.cells.1.max(self.cells.0.max(1)));
         let dye = DYES[rng.random_range(0..DYES.len())];
         Hide {
             dye: srgb(jitter(&mut rng, dye, 0.08)),
             cells: PeriodicCells::new(rng.random(), rng.random_range(0.7..1.0)),
-            period: rng.random_range(lo..=hi),
+            period: rng.random_range(counts(self.cells, 2)), // warp noise uses period / 2
             warp: rng.random_range(0.2..0.6),
             crease: rng.random_range(0.06..0.14),
             wrinkles: rng.random_range(0.0..0.35),

@@ -21,7 +21,9 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
 use super::Family;
-use super::common::{GgxTexel, Pattern, Streaks, hsv, mix, sample_maps, scale, smoothstep, srgb};
+use super::common::{
+    GgxTexel, Pattern, Streaks, counts, hsv, mix, sample_maps, scale, smoothstep, srgb,
+};
 use super::noise::{PeriodicNoise, mix64, unit_f64};
 
 /// Configuration of the paint family; every field has a documented default.
@@ -71,7 +73,6 @@ struct Coat {
 impl Paint {
     fn member(&self, seed: u64) -> Coat {
         let mut rng = StdRng::seed_from_u64(seed);
-        let (lo, hi) = (self.lanes.0.max(1), self.lanes.1.max(self.lanes.0.max(1)));
         // Greys half as often as colours; values kept off pure black and white.
         let saturation = if rng.random_bool(0.3) {
             rng.random_range(0.0..0.08)
@@ -87,7 +88,7 @@ impl Paint {
         Coat {
             colour,
             streaks: Streaks::random(&mut rng),
-            lanes: rng.random_range(lo..=hi),
+            lanes: rng.random_range(counts(self.lanes, 1)),
             wobble: rng.random_range(0.15..0.35),
             strokes: rng.random_range(1..=3),
             bristles: rng.random_range(50..120),

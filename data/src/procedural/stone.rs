@@ -23,7 +23,9 @@ use rand::{Rng, SeedableRng};
 use super::Family;
 use super::cellular::PeriodicCells;
 use super::common::srgb;
-use super::common::{GgxTexel, Pattern, Symmetry, jitter, mix, sample_maps, scale, smoothstep};
+use super::common::{
+    GgxTexel, Pattern, Symmetry, counts, jitter, mix, sample_maps, scale, smoothstep,
+};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the stone family; every field has a documented default.
@@ -160,10 +162,6 @@ impl Stone {
             }
             1 => {
                 let c = &GRANITES[rng.random_range(0..GRANITES.len())];
-                let (lo, hi) = (
-                    self.grains.0.max(1),
-                    self.grains.1.max(self.grains.0.max(1)),
-                );
                 let flamed = if rng.random_bool(0.3) { 1.0 } else { 0.0 };
                 let kind = Kind::Granite {
                     majors: c.majors.map(|m| srgb(jitter(&mut rng, m, 0.06))),
@@ -172,7 +170,7 @@ impl Stone {
                     specks: c.specks,
                     cells: PeriodicCells::new(rng.random(), 1.0),
                     speck_cells: PeriodicCells::new(rng.random(), 1.0),
-                    grains: rng.random_range(lo..=hi),
+                    grains: rng.random_range(counts(self.grains, 1)),
                     flamed,
                 };
                 let finish = if flamed > 0.0 {
@@ -223,7 +221,7 @@ impl Pattern for Slab {
                 let (wx, wy) = (x + 0.3 * n1.fbm(x, y, 2, 4), y + 0.3 * n2.fbm(x, y, 2, 4));
                 let main = 1.0 - smoothstep(0.0, *width, n3.fbm(wx, wy, 2, 5).abs());
                 let fine = 1.0 - smoothstep(0.0, 0.4 * width, n3.fbm(wx, wy, 5, 3).abs());
-                let veins = (main + 0.5 * fine).min(1.0);
+                let veins = (main + 0.5 * fine).min(1.0); // crossing veins are no more than opaque
                 let body = scale(*body, 1.0 + 0.12 * cloud);
                 let diffuse = mix(body, *vein, contrast * veins);
                 // Polished: a hair rougher and lower along veins (softer filling minerals).
@@ -293,8 +291,8 @@ impl Pattern for Slab {
                     0.0
                 };
                 let shade = (1.0 + 0.1 * band + 0.15 * cloud + 0.1 * grit) * (1.0 - 0.35 * pit);
-                let bumps = n3.fbm(x, y, 4, 5);
-                let height = 0.55 + 0.3 * bumps + 0.05 * grit - 0.25 * pit;
+                let bumps = n3.fbm(x, y, 6, 5);
+                let height = 0.55 + 0.3 * bumps + 0.1 * grit - 0.25 * pit;
                 (scale(*colour, shade), self.finish + 0.05 * grit, height)
             }
         };

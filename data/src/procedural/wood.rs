@@ -20,7 +20,9 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
 use super::Family;
-use super::common::{GgxTexel, Pattern, Symmetry, jitter, mix, sample_maps, scale, smoothstep};
+use super::common::{
+    GgxTexel, Pattern, Symmetry, counts, jitter, mix, sample_maps, scale, smoothstep,
+};
 use super::common::{srgb, wrap01};
 use super::noise::{PeriodicNoise, mix64, unit_f64};
 
@@ -90,7 +92,7 @@ impl Wood {
         let mut rng = StdRng::seed_from_u64(seed);
         let (early, late) = SPECIES[rng.random_range(0..SPECIES.len())];
         let k = rng.random_range(0.8..1.15); // lighter or darker stock of the species
-        let planks = rng.random_range(1..=self.max_planks.max(1));
+        let planks = rng.random_range(counts((1, self.max_planks), 1));
         let plank = (0..planks)
             .map(|_| {
                 (
@@ -101,14 +103,13 @@ impl Wood {
                 )
             })
             .collect();
-        let (lo, hi) = (self.rings.0.max(1), self.rings.1.max(self.rings.0.max(1)));
         Board {
             symmetry: Symmetry::random(&mut rng),
             early: srgb(jitter(&mut rng, scale(early, k), 0.04)),
             late: srgb(jitter(&mut rng, scale(late, k), 0.04)),
             planks,
             plank,
-            rings: rng.random_range(lo..=hi),
+            rings: rng.random_range(counts(self.rings, 1)),
             waviness: rng.random_range(0.5..3.0),
             latewood: rng.random_range(0.1..0.25),
             pore_period: rng.random_range(24..48),
