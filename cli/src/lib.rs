@@ -19,7 +19,10 @@
 //! - `photomat brdf-eval --brdf SPEC --cases FILE.json [--grad] [--f64]`: values (and
 //!   Jacobians) of a model at given directions and parameters, as JSON on stdout;
 //! - `photomat simulate --count N --size S --out DIR [--seed K] [--format jpg|png]`: phone-flash
-//!   photos of procedural materials with ground-truth maps and highlights.
+//!   photos of procedural materials with ground-truth maps and highlights;
+//! - `photomat prepare --photos DIR --out DATASET [--size 512] [--detector robust|paper]`: flash
+//!   photos → square images, highlights, index.json and report.txt;
+//! - `photomat eval-detector --dataset DIR [--detector NAME]`: highlight error per family.
 
 use std::ffi::OsString;
 use std::io::Write;
@@ -52,6 +55,10 @@ enum Command {
     BrdfEval(commands::brdf_eval::Args),
     /// Simulate phone-flash photos of procedural materials, with their ground truth.
     Simulate(commands::simulate::Args),
+    /// Prepare a folder of flash photos as a dataset: square images, highlights, report.
+    Prepare(commands::prepare::Args),
+    /// Measure the highlight detectors against a simulated dataset's true highlights.
+    EvalDetector(commands::eval_detector::Args),
 }
 
 impl Command {
@@ -62,6 +69,8 @@ impl Command {
             Command::Render(args) => commands::render::run(args, out),
             Command::BrdfEval(args) => commands::brdf_eval::run(args, out),
             Command::Simulate(args) => commands::simulate::run(args, out),
+            Command::Prepare(args) => commands::prepare::run(args, out),
+            Command::EvalDetector(args) => commands::eval_detector::run(args, out),
         }
     }
 }

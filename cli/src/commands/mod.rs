@@ -3,6 +3,8 @@
 pub mod brdf_eval;
 pub mod brdfs;
 pub mod demo;
+pub mod eval_detector;
+pub mod prepare;
 pub mod previews;
 pub mod render;
 pub mod simulate;

@@ -90,31 +90,71 @@ const ALPHA_STARTS: [f64; 7] = [0.015, 0.03, 0.06, 0.12, 0.25, 0.5, 1.0];
 const ALPHA_MIN: f64 = 0.005;
 const ALPHA_MAX: f64 = 3.0;
 
+/// Largest flash-beam exponent k searched: cos⁴ already halves the light 33° off the beam axis,
+/// narrower than any phone flash LED (Lambertian emitters are k ≈ 1).
+const BEAM_MAX: f64 = 4.0;
+
 /// Cauchy tuning constant (95 % efficiency under Gaussian noise, Holland & Welsch 1977).
 const CAUCHY_C: f64 = 2.385;
 
 /// IRLS rounds: weights and fitting domain are re-estimated this often; the position moves by
 /// less than 0.01 pixel after the third round on every simulated family.
-const IRLS_ROUNDS: usize = 4;
+const IRLS_ROUNDS: usize = 5;
 
-/// One grid cell: plane position, mean linear intensity, whether it is usable.
+/// Starting positions per axis of the initial grid search.
+const GRID_STARTS: usize = 9;
+
+/// Largest move of a symmetric-domain round, plane units (2.5 % of the width).
+const MAX_POLISH: f64 = 0.05;
+
+/// Of the IRLS rounds, how many fit on the domain symmetric about the estimate (the rest use
+/// the whole photo).
+const SYMMETRIC_ROUNDS: usize = 2;
+
+/// The fitted flash model of one photo (module docs, "Model").
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FlashFit {
+    /// Highlight in plane coordinates of the side-2 photo (x right, y up).
+    pub lx: f64,
+    pub ly: f64,
+    /// Width α of the specular lobe.
+    pub alpha: f64,
+    /// Vignetting strength v of `1 − v + v·cos⁴θ`.
+    pub vignetting: f64,
+    /// Exponent k of the flash beam `cos^k β`.
+    pub beam: f64,
+    /// Coefficients of the diffuse profile, the specular profile and the ambient constant.
+    pub coefficients: [f64; 3],
+    /// Share of the flash in the fitted intensity over the fitting domain.
+    pub flash_share: f64,
+}
+
+/// Nonlinear parameters: lₓ, l_y, ln α, v, k.
+type Params = [f64; 5];
+
+/// One grid cell: plane position, cos⁴ of its angle off the optical axis, mean linear
+/// intensity, whether it is usable.
 #[derive(Debug, Clone, Copy)]
 struct Cell {
     x: f64,
     y: f64,
-    r2: f64,
+    cos4: f64,
     y_lin: f64,
     usable: bool,
 }
 
-/// A fitted model: position, lobe width, linear coefficients and weighted cost.
+/// A fitted model: nonlinear parameters, linear coefficients and weighted cost.
 #[derive(Debug, Clone, Copy)]
 struct Fit {
-    lx: f64,
-    ly: f64,
-    alpha: f64,
-    coef: [f64; 5],
+    p: Params,
+    coef: [f64; 3],
     cost: f64,
+}
+
+impl Fit {
+    fn alpha(&self) -> f64 {
+        self.p[2].exp().clamp(ALPHA_MIN, ALPHA_MAX)
+    }
 }
 
 impl HighlightDetector for RobustDetector {
@@ -123,39 +163,14 @@ impl HighlightDetector for RobustDetector {
     }
 
     fn detect(&self, image: &PlanarImage) -> Result<Detection> {
-        let intensity = min_rgb_linear(image)?;
         let (h, w) = (image.height, image.width);
-        let cells = self.cells(&intensity, h, w);
-        let usable: Vec<&Cell> = cells.iter().filter(|c| c.usable).collect();
-        let mean = usable.iter().map(|c| c.y_lin).sum::<f64>() / usable.len().max(1) as f64;
-        if usable.len() < 16 || mean <= 0.0 {
+        let Some(fit) = self.fit(image)? else {
             return Ok(Detection::fallback(
                 h,
                 w,
                 "no usable pixels: the image is black or saturated",
             ));
-        }
-        // Relative residuals are taken against at least 2 % of the mean intensity, so black
-        // texels (noise only) cannot dominate the fit.
-        let floor = 0.02 * mean;
-        let mut weights: Vec<f64> = cells
-            .iter()
-            .map(|c| {
-                if c.usable {
-                    1.0 / c.y_lin.max(floor).powi(2)
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let half_h = h as f64 / w as f64; // plane half-height (the width spans [−1, 1])
-        let mut fit = self.initial_fit(&cells, &weights, half_h);
-        for _ in 0..IRLS_ROUNDS {
-            let domain = domain_weights(&cells, fit.lx, fit.ly, half_h);
-            let base: Vec<f64> = weights.iter().zip(&domain).map(|(w, d)| w * d).collect();
-            fit = nelder_mead(&cells, &base, fit);
-            weights = reweight(&cells, &fit, floor);
-        }
+        };
         if !(fit.lx.is_finite() && fit.ly.is_finite()) {
             return Ok(Detection::fallback(h, w, "the flash model fit did not converge"));
         }
@@ -174,15 +189,14 @@ impl HighlightDetector for RobustDetector {
                 ),
             ));
         }
-        let share = flash_share(&cells, &fit, half_h);
-        if share < self.min_flash_share {
+        if fit.flash_share < self.min_flash_share {
             return Ok(Detection::fallback(
                 h,
                 w,
                 format!(
                     "the flash does not dominate: it explains {:.0} % of the intensity around \
                      the highlight (limit {:.0} %); ambient light or a black sample",
-                    100.0 * share,
+                    100.0 * fit.flash_share,
                     100.0 * self.min_flash_share
                 ),
             ));
@@ -192,6 +206,71 @@ impl HighlightDetector for RobustDetector {
 }
 
 impl RobustDetector {
+    /// The fitted flash model of `image`, or `None` when it has too few usable (non-black,
+    /// unsaturated) pixels to fit. [`HighlightDetector::detect`] applies the failure rule to it.
+    pub fn fit(&self, image: &PlanarImage) -> Result<Option<FlashFit>> {
+        let intensity = min_rgb_linear(image)?;
+        let (h, w) = (image.height, image.width);
+        let cells = self.cells(&intensity, h, w);
+        let usable = cells.iter().filter(|c| c.usable).count();
+        let mean = cells
+            .iter()
+            .filter(|c| c.usable)
+            .map(|c| c.y_lin)
+            .sum::<f64>()
+            / usable.max(1) as f64;
+        // 16 cells: twice the model's 8 unknowns, the least for a robust fit.
+        if usable < 16 || mean <= 0.0 {
+            return Ok(None);
+        }
+        // Relative residuals are taken against at least 2 % of the mean intensity, so black
+        // texels (noise only) cannot dominate the fit.
+        let floor = 0.02 * mean;
+        let mut weights: Vec<f64> = cells
+            .iter()
+            .map(|c| {
+                if c.usable {
+                    1.0 / c.y_lin.max(floor)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let half_h = h as f64 / w as f64; // plane half-height (the width spans [−1, 1])
+        let mut fit = initial_fit(&cells, &weights);
+        for round in 0..IRLS_ROUNDS {
+            // The first rounds see the whole photo, so the fit cannot drift by shrinking its
+            // domain; the last ones only the square symmetric about the estimate.
+            let base: Vec<f64> = if round < IRLS_ROUNDS - SYMMETRIC_ROUNDS {
+                weights.clone()
+            } else {
+                let domain = domain_weights(&cells, fit.p[0], fit.p[1], half_h);
+                weights.iter().zip(&domain).map(|(w, d)| w * d).collect()
+            };
+            let next = nelder_mead(&cells, &base, fit);
+            // A symmetric round only polishes: a big jump means it followed its own shrinking
+            // domain rather than the photo, so the whole-photo estimate stands.
+            if round >= IRLS_ROUNDS - SYMMETRIC_ROUNDS
+                && (next.p[0] - fit.p[0]).hypot(next.p[1] - fit.p[1]) > MAX_POLISH
+            {
+                break;
+            }
+            fit = next;
+            weights = reweight(&cells, &fit, floor);
+        }
+        let (lx, ly) =
+            refine_peak(&intensity, h, w, &fit, &cells).unwrap_or((fit.p[0], fit.p[1]));
+        Ok(Some(FlashFit {
+            lx,
+            ly,
+            alpha: fit.alpha(),
+            vignetting: fit.p[3].clamp(0.0, 1.0),
+            beam: fit.p[4].clamp(0.0, BEAM_MAX),
+            coefficients: fit.coef,
+            flash_share: flash_share(&cells, &fit, half_h),
+        }))
+    }
+
     /// Block averages of the intensity on a grid of about `self.grid` cells across the width.
     fn cells(&self, intensity: &[f64], h: usize, w: usize) -> Vec<Cell> {
         let k = (w / self.grid.max(1)).max(1);
@@ -211,10 +290,11 @@ impl RobustDetector {
                 let row = (bi as f64 + 0.5) * kr as f64;
                 let col = (bj as f64 + 0.5) * kc as f64;
                 let (x, y) = ((col - w as f64 / 2.0) * scale, (h as f64 / 2.0 - row) * scale);
+                let cos2 = 1.0 / (1.0 + x * x + y * y);
                 cells.push(Cell {
                     x,
                     y,
-                    r2: x * x + y * y,
+                    cos4: cos2 * cos2,
                     y_lin: sum / (kr * kc) as f64,
                     usable: !saturated,
                 });
@@ -222,43 +302,138 @@ impl RobustDetector {
         }
         cells
     }
+}
 
-    /// Best of a few starting positions (brightest blurred cell, above-mean centroid, image
-    /// centre) × [`ALPHA_STARTS`], scored on the whole image.
-    fn initial_fit(&self, cells: &[Cell], weights: &[f64], half_h: f64) -> Fit {
-        let mut starts = vec![(0.0, 0.0)];
-        if let Some(c) = brightest(cells) {
-            starts.push(c);
-        }
-        let mean = cells.iter().map(|c| c.y_lin).sum::<f64>() / cells.len() as f64;
-        let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
-        for c in cells.iter().filter(|c| c.y_lin > mean) {
-            s += c.y_lin;
-            sx += c.y_lin * c.x;
-            sy += c.y_lin * c.y;
-        }
-        if s > 0.0 {
-            starts.push((sx / s, sy / s));
-        }
-        let mut best: Option<Fit> = None;
-        for &(lx, ly) in &starts {
-            let domain = domain_weights(cells, lx, ly, half_h);
-            let base: Vec<f64> = weights.iter().zip(&domain).map(|(w, d)| w * d).collect();
-            for &alpha in &ALPHA_STARTS {
-                let fit = solve(cells, &base, lx, ly, alpha);
-                // Compare starts by cost per unit of domain weight: domains differ in size.
-                let norm = base.iter().sum::<f64>().max(f64::MIN_POSITIVE);
-                let fit = Fit {
-                    cost: fit.cost / norm,
-                    ..fit
-                };
-                if best.is_none_or(|b| fit.cost < b.cost) {
-                    best = Some(fit);
+/// Mean-shift refinement on the full-resolution specular residual when the fit found a
+/// distinct, compact lobe: the residual above the fitted diffuse + ambient part, centroid over
+/// a square window centred on the current estimate, repeated until the window stops moving.
+/// At the fixed point the residual's centroid is the window's centre, so any lobe symmetric
+/// about the flash point (round, a brushed streak, clipped) is found without the radial
+/// model's shape; the camera factor barely tilts a lobe this narrow.
+fn refine_peak(
+    intensity: &[f64],
+    h: usize,
+    w: usize,
+    fit: &Fit,
+    cells: &[Cell],
+) -> Option<(f64, f64)> {
+    let alpha = fit.alpha();
+    let [a, b, c] = fit.coef;
+    let saturated = cells
+        .iter()
+        .filter(|c| !c.usable && (c.x - fit.p[0]).hypot(c.y - fit.p[1]) < 3.0 * alpha)
+        .count();
+    if saturated < 4 {
+        return None;
+    }
+    // Distinct: the lobe's peak at least half the diffuse + ambient level under it; compact:
+    // α ≤ 0.25, so a window of 3α stays inside a photo whose flash is off by 25 % at most.
+    if b < 0.5 * (a + c) || alpha > 0.25 {
+        return None;
+    }
+    let scale = PHOTO_SIDE / w as f64;
+    let half_window = (3.0 * alpha).max(4.0 * scale);
+    let background = |x: f64, y: f64| {
+        let cell = Cell {
+            x,
+            y,
+            cos4: (1.0 / (1.0 + x * x + y * y)).powi(2),
+            y_lin: 0.0,
+            usable: true,
+        };
+        let basis = basis(&cell, &fit.p);
+        a * basis[0] + c
+    };
+    let (mut lx, mut ly) = (fit.p[0], fit.p[1]);
+    // 50 shifts: each moves by the residual's offset inside the window, which shrinks
+    // geometrically; stop below 0.01 pixel.
+    for _ in 0..50 {
+        let (x0, x1) = (lx - half_window, lx + half_window);
+        let (y0, y1) = (ly - half_window, ly + half_window);
+        let c0 = (((x0 + 1.0) / scale).floor().max(0.0) as usize).min(w);
+        let c1 = (((x1 + 1.0) / scale).ceil().max(0.0) as usize).min(w);
+        let half_h = h as f64 / w as f64;
+        let r0 = (((half_h - y1) / scale).floor().max(0.0) as usize).min(h);
+        let r1 = (((half_h - y0) / scale).ceil().max(0.0) as usize).min(h);
+        // Residuals inside the window; only their top half (above half the largest) counts,
+        // so dimmer texture (bright grout, wood grain) under a bright lobe does not pull.
+        let mut window = Vec::new();
+        for row in r0..r1 {
+            let y = half_h - (row as f64 + 0.5) * scale;
+            if y < y0 || y > y1 {
+                continue;
+            }
+            for col in c0..c1 {
+                let x = (col as f64 + 0.5) * scale - 1.0;
+                if x < x0 || x > x1 {
+                    continue;
                 }
+                window.push((x, y, intensity[row * w + col] - background(x, y)));
             }
         }
-        best.expect("at least one start")
+        let top = window.iter().map(|p| p.2).fold(0.0, f64::max);
+        let (mut sum, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for &(x, y, r) in &window {
+            let weight = r - 0.5 * top;
+            if weight > 0.0 {
+                sum += weight;
+                sx += weight * x;
+                sy += weight * y;
+            }
+        }
+        if sum <= 0.0 {
+            return None;
+        }
+        let (nx, ny) = (sx / sum, sy / sum);
+        let moved = (nx - lx).hypot(ny - ly);
+        (lx, ly) = (nx, ny);
+        if moved < 0.01 * scale {
+            break;
+        }
     }
+    // A window that wandered far from the fit followed something else than the lobe.
+    ((lx - fit.p[0]).hypot(ly - fit.p[1]) <= 2.0 * alpha).then_some((lx, ly))
+}
+
+/// Best of a few starting positions (brightest blurred cell, above-mean centroid, image
+/// centre) × [`ALPHA_STARTS`], with mid-range camera parameters, scored per unit of weight.
+fn initial_fit(cells: &[Cell], weights: &[f64]) -> Fit {
+    let mut starts = vec![(0.0, 0.0)];
+    if let Some(c) = brightest(cells) {
+        starts.push(c);
+    }
+    let centroid = |keep: &dyn Fn(&Cell) -> bool, weight: &dyn Fn(&Cell) -> f64| {
+        let (mut s, mut sx, mut sy) = (0.0, 0.0, 0.0);
+        for c in cells.iter().filter(|c| keep(c)) {
+            s += weight(c);
+            sx += weight(c) * c.x;
+            sy += weight(c) * c.y;
+        }
+        (s > 0.0).then(|| (sx / s, sy / s))
+    };
+    let mean = cells.iter().map(|c| c.y_lin).sum::<f64>() / cells.len() as f64;
+    // The paper's above-mean centroid, and the centroid of the saturated cells (a clipped
+    // highlight hides its core from the fit).
+    starts.extend(centroid(&|c| c.y_lin > mean, &|c| c.y_lin));
+    starts.extend(centroid(&|c| !c.usable, &|_| 1.0));
+    // A 9×9 grid over the central half of the photo (steps of 6 % of the width): the flash
+    // is aimed at the centre, and one grid point lies within the basin of any lobe there.
+    for i in 0..GRID_STARTS {
+        for j in 0..GRID_STARTS {
+            let t = |k: usize| (k as f64 / (GRID_STARTS - 1) as f64 - 0.5) * 1.0;
+            starts.push((t(j), t(i)));
+        }
+    }
+    let mut best: Option<Fit> = None;
+    for &(lx, ly) in &starts {
+        for &alpha in &ALPHA_STARTS {
+            let fit = solve(cells, weights, [lx, ly, alpha.ln(), 0.25, 0.5]);
+            if best.is_none_or(|b| fit.cost < b.cost) {
+                best = Some(fit);
+            }
+        }
+    }
+    best.expect("at least one start")
 }
 
 /// Centre of the brightest cell after a 5×5 box blur (the blur keeps single hot texels
@@ -306,66 +481,82 @@ fn domain_weights(cells: &[Cell], lx: f64, ly: f64, half_h: f64) -> Vec<f64> {
         .collect()
 }
 
-/// The five basis functions at a cell for flash point (lx, ly) and lobe width α.
+/// The basis functions at a cell: camera factor × diffuse profile, camera factor × specular
+/// profile, and the ambient constant.
 #[inline]
-fn basis(c: &Cell, lx: f64, ly: f64, alpha2: f64) -> [f64; 5] {
+fn basis(c: &Cell, p: &Params) -> [f64; 3] {
+    let (lx, ly) = (p[0], p[1]);
+    let alpha = p[2].exp().clamp(ALPHA_MIN, ALPHA_MAX);
+    let alpha2 = alpha * alpha;
+    let v = p[3].clamp(0.0, 1.0);
+    let k = p[4].clamp(0.0, BEAM_MAX);
     let s2 = (c.x - lx).powi(2) + (c.y - ly).powi(2);
     let q = 1.0 + s2;
     let root = q.sqrt();
     let g_d = 1.0 / (q * root);
     let lobe = alpha2 / (alpha2 + s2);
     let g_s = lobe * lobe * q * root;
-    [g_d, g_s, -c.r2 * g_d, -c.r2 * g_s, 1.0]
+    // cos β between the rays flash→cell and flash→image centre, flash at (lx, ly, 1).
+    let l2 = lx * lx + ly * ly;
+    let cos_beam = ((1.0 + l2 - c.x * lx - c.y * ly) / (root * (1.0 + l2).sqrt())).max(1e-6);
+    let camera = (1.0 - v + v * c.cos4) * if k > 0.0 { cos_beam.powf(k) } else { 1.0 };
+    [camera * g_d, camera * g_s, 1.0]
 }
 
-/// Weighted least-squares coefficients for fixed (lx, ly, α); flash coefficients must be
-/// non-negative (a dip is not a flash), so a fit violating that is redone without the
-/// offending profile.
-fn solve(cells: &[Cell], weights: &[f64], lx: f64, ly: f64, alpha: f64) -> Fit {
-    let alpha2 = alpha * alpha;
-    let mut ata = [[0.0f64; 5]; 5];
-    let mut atb = [0.0f64; 5];
+/// Weighted least-squares coefficients for fixed nonlinear parameters. All three must be
+/// non-negative (a dip is not a flash, light does not subtract), so the best non-negative
+/// solution among the subsets of basis functions is kept.
+fn solve(cells: &[Cell], weights: &[f64], p: Params) -> Fit {
+    // The flash point stays inside the photo: outside it, an empty symmetric domain would fit
+    // perfectly.
+    if p[0].abs() > 1.0 || p[1].abs() > 1.0 {
+        return Fit {
+            p,
+            coef: [0.0; 3],
+            cost: f64::INFINITY,
+        };
+    }
+    let mut ata = [[0.0f64; 3]; 3];
+    let mut atb = [0.0f64; 3];
     let mut btb = 0.0;
     for (c, &wt) in cells.iter().zip(weights) {
         if wt == 0.0 {
             continue;
         }
-        let b = basis(c, lx, ly, alpha2);
-        for i in 0..5 {
+        let b = basis(c, &p);
+        for i in 0..3 {
             let wb = wt * b[i];
             atb[i] += wb * c.y_lin;
-            for j in i..5 {
+            for j in i..3 {
                 ata[i][j] += wb * b[j];
             }
         }
         btb += wt * c.y_lin * c.y_lin;
     }
-    for i in 0..5 {
+    for i in 0..3 {
         for j in 0..i {
             ata[i][j] = ata[j][i];
         }
     }
-    // Subsets: both profiles; diffuse only (drop g_s and its vignetting); specular only.
-    const SUBSETS: [&[usize]; 3] = [&[0, 1, 2, 3, 4], &[0, 2, 4], &[1, 3, 4]];
+    // Subsets: both profiles, diffuse only, specular only; with and without ambient light.
+    const SUBSETS: [&[usize]; 6] = [&[0, 1, 2], &[0, 2], &[1, 2], &[0, 1], &[0], &[1]];
     let mut best = Fit {
-        lx,
-        ly,
-        alpha,
-        coef: [0.0; 5],
+        p,
+        coef: [0.0; 3],
         cost: btb,
     };
     for subset in SUBSETS {
         let Some(x) = solve_subset(&ata, &atb, subset) else {
             continue;
         };
-        let mut coef = [0.0; 5];
+        let mut coef = [0.0; 3];
         for (k, &i) in subset.iter().enumerate() {
             coef[i] = x[k];
         }
-        if coef[0] < 0.0 || coef[1] < 0.0 {
+        if coef.iter().any(|&c| c < 0.0) {
             continue;
         }
-        // Weighted SSE = yᵀWy − 2 xᵀAᵀWy + xᵀAᵀWAx = yᵀWy − xᵀAᵀWy at the LS solution.
+        // Weighted SSE = yᵀWy − xᵀAᵀWy at the least-squares solution.
         let cost = btb - subset.iter().zip(&x).map(|(&i, xi)| xi * atb[i]).sum::<f64>();
         if cost < best.cost {
             best.coef = coef;
@@ -376,7 +567,7 @@ fn solve(cells: &[Cell], weights: &[f64], lx: f64, ly: f64, alpha: f64) -> Fit {
 }
 
 /// Solve the normal equations restricted to `subset` by Cholesky; `None` if singular.
-fn solve_subset(ata: &[[f64; 5]; 5], atb: &[f64; 5], subset: &[usize]) -> Option<Vec<f64>> {
+fn solve_subset(ata: &[[f64; 3]; 3], atb: &[f64; 3], subset: &[usize]) -> Option<Vec<f64>> {
     let n = subset.len();
     let mut l = vec![0.0f64; n * n];
     // A relative ridge of 1e-12 keeps nearly collinear profiles (α ≫ 1) solvable without
@@ -418,7 +609,7 @@ fn solve_subset(ata: &[[f64; 5]; 5], atb: &[f64; 5], subset: &[usize]) -> Option
 
 /// Model value at a cell.
 fn model(c: &Cell, fit: &Fit) -> f64 {
-    let b = basis(c, fit.lx, fit.ly, fit.alpha * fit.alpha);
+    let b = basis(c, &fit.p);
     b.iter().zip(&fit.coef).map(|(b, k)| b * k).sum()
 }
 
@@ -442,7 +633,7 @@ fn reweight(cells: &[Cell], fit: &Fit, floor: f64) -> Vec<f64> {
         .map(|r| match r {
             Some((r, m)) => {
                 let u = r / (CAUCHY_C * sigma);
-                1.0 / (m * m * (1.0 + u * u))
+                1.0 / (m * (1.0 + u * u))
             }
             None => 0.0,
         })
@@ -452,94 +643,84 @@ fn reweight(cells: &[Cell], fit: &Fit, floor: f64) -> Vec<f64> {
 /// Share of the fitted flash (everything but the ambient constant) in the fitted intensity,
 /// averaged over the fitting domain.
 fn flash_share(cells: &[Cell], fit: &Fit, half_h: f64) -> f64 {
-    let domain = domain_weights(cells, fit.lx, fit.ly, half_h);
+    let domain = domain_weights(cells, fit.p[0], fit.p[1], half_h);
     let (mut flash, mut total) = (0.0, 0.0);
     for (c, d) in cells.iter().zip(domain) {
         if d > 0.0 {
             let m = model(c, fit);
-            flash += m - fit.coef[4];
+            flash += m - fit.coef[2];
             total += m;
         }
     }
     if total > 0.0 { flash / total } else { 0.0 }
 }
 
-/// Nelder–Mead over (lx, ly, ln α) with the linear coefficients solved at every vertex;
-/// standard coefficients (reflection 1, expansion 2, contraction ½, shrink ½).
+/// Nelder–Mead over the nonlinear parameters with the linear coefficients solved at every
+/// vertex; standard coefficients (reflection 1, expansion 2, contraction ½, shrink ½).
 fn nelder_mead(cells: &[Cell], weights: &[f64], start: Fit) -> Fit {
-    // Initial steps: 0.04 plane units (1 % of the side-2 width ≈ 10 px at 512²) and a factor
-    // 1.5 in α; the search stops when the simplex spans less than 1e-4 units (0.005 % width).
-    const STEP_POS: f64 = 0.04;
-    const STEP_LOG_ALPHA: f64 = 0.4;
+    const N: usize = 5;
+    // Initial steps: 0.04 plane units (1 % of the side-2 width ≈ 5 px at 512²), a factor 1.5
+    // in α, 0.15 in v and 0.5 in k; the search stops when the simplex's positions span less
+    // than 1e-4 units (0.005 % of the width).
+    const STEPS: Params = [0.04, 0.04, 0.4, 0.15, 0.5];
     const TOLERANCE: f64 = 1e-4;
-    const MAX_EVALS: usize = 300;
-    let eval = |p: [f64; 3]| -> Fit {
-        let alpha = p[2].exp().clamp(ALPHA_MIN, ALPHA_MAX);
-        solve(cells, weights, p[0], p[1], alpha)
-    };
-    let p0 = [start.lx, start.ly, start.alpha.ln()];
-    let mut simplex: Vec<([f64; 3], Fit)> = vec![(p0, eval(p0))];
-    for (k, step) in [STEP_POS, STEP_POS, STEP_LOG_ALPHA].into_iter().enumerate() {
-        let mut p = p0;
+    const MAX_EVALS: usize = 600;
+    let eval = |p: Params| solve(cells, weights, p);
+    let mut simplex: Vec<Fit> = vec![eval(start.p)];
+    for (k, step) in STEPS.into_iter().enumerate() {
+        let mut p = start.p;
         p[k] += step;
-        simplex.push((p, eval(p)));
+        simplex.push(eval(p));
     }
-    let mut evals = 4;
+    let mut evals = N + 1;
     while evals < MAX_EVALS {
-        simplex.sort_by(|a, b| a.1.cost.total_cmp(&b.1.cost));
+        simplex.sort_by(|a, b| a.cost.total_cmp(&b.cost));
         let spread = simplex[1..]
             .iter()
-            .map(|(p, _)| (p[0] - simplex[0].0[0]).hypot(p[1] - simplex[0].0[1]))
+            .map(|f| (f.p[0] - simplex[0].p[0]).hypot(f.p[1] - simplex[0].p[1]))
             .fold(0.0, f64::max);
         if spread < TOLERANCE {
             break;
         }
-        let mut centroid = [0.0; 3];
-        for (p, _) in &simplex[..3] {
-            for k in 0..3 {
-                centroid[k] += p[k] / 3.0;
+        let mut centroid = [0.0; N];
+        for f in &simplex[..N] {
+            for k in 0..N {
+                centroid[k] += f.p[k] / N as f64;
             }
         }
-        let worst = simplex[3].clone();
-        let along = |t: f64| -> [f64; 3] {
-            let mut p = [0.0; 3];
-            for k in 0..3 {
-                p[k] = centroid[k] + t * (worst.0[k] - centroid[k]);
+        let worst = simplex[N];
+        let along = |t: f64| -> Params {
+            let mut p = [0.0; N];
+            for k in 0..N {
+                p[k] = centroid[k] + t * (worst.p[k] - centroid[k]);
             }
             p
         };
-        let reflected = along(-1.0);
-        let fr = eval(reflected);
+        let fr = eval(along(-1.0));
         evals += 1;
-        if fr.cost < simplex[0].1.cost {
-            let expanded = along(-2.0);
-            let fe = eval(expanded);
+        if fr.cost < simplex[0].cost {
+            let fe = eval(along(-2.0));
             evals += 1;
-            simplex[3] = if fe.cost < fr.cost {
-                (expanded, fe)
-            } else {
-                (reflected, fr)
-            };
-        } else if fr.cost < simplex[2].1.cost {
-            simplex[3] = (reflected, fr);
+            simplex[N] = if fe.cost < fr.cost { fe } else { fr };
+        } else if fr.cost < simplex[N - 1].cost {
+            simplex[N] = fr;
         } else {
-            let contracted = if fr.cost < worst.1.cost {
+            let fc = eval(if fr.cost < worst.cost {
                 along(-0.5)
             } else {
                 along(0.5)
-            };
-            let fc = eval(contracted);
+            });
             evals += 1;
-            if fc.cost < worst.1.cost.min(fr.cost) {
-                simplex[3] = (contracted, fc);
+            if fc.cost < worst.cost.min(fr.cost) {
+                simplex[N] = fc;
             } else {
-                let best = simplex[0].0;
+                let best = simplex[0].p;
                 for vertex in simplex.iter_mut().skip(1) {
-                    let mut p = [0.0; 3];
-                    for k in 0..3 {
-                        p[k] = best[k] + 0.5 * (vertex.0[k] - best[k]);
+                    let mut p = [0.0; N];
+                    for k in 0..N {
+                        p[k] = best[k] + 0.5 * (vertex.p[k] - best[k]);
                     }
-                    *vertex = (p, eval(p));
+                    *vertex = eval(p);
                     evals += 1;
                 }
             }
@@ -547,9 +728,8 @@ fn nelder_mead(cells: &[Cell], weights: &[f64], start: Fit) -> Fit {
     }
     simplex
         .into_iter()
-        .min_by(|a, b| a.1.cost.total_cmp(&b.1.cost))
-        .map(|(_, f)| f)
-        .expect("four vertices")
+        .min_by(|a, b| a.cost.total_cmp(&b.cost))
+        .expect("vertices")
 }
 
 #[cfg(test)]
