@@ -166,13 +166,11 @@ mod tests {
     fn brushed_metal_varies_across_the_brushing_not_along_it() {
         for seed in 0..8 {
             let sheet = BrushedMetal::default().member(seed);
-            // A unit step along the direction (a, b) is (a, b)/|(a,b)|² in (u, v)…
+            // Mean |Δheight| over a step of h·(a, b) along the brushing direction and of
+            // h·(−b, a) across it.
             let (mut along, mut across) = (0.0, 0.0);
             let h = 1.0 / 512.0;
-            let (a, b) = (
-                sheet.streaks.apply(1.0, 0.0).0,
-                sheet.streaks.apply(0.0, 1.0).0,
-            );
+            let (a, b) = (sheet.streaks.a as f64, sheet.streaks.b as f64);
             for k in 0..300 {
                 let (u, v) = ((k as f64 * 0.6180) % 1.0, (k as f64 * 0.4142) % 1.0);
                 let h0 = sheet.sample(u, v).height;

@@ -3,7 +3,7 @@
 //!
 //! Imitates automotive paint on a flat panel: metallic (aluminium flakes), pearl (mica
 //! flakes whose interference tints the flake lobe towards another hue) and solid (no flakes).
-//! Lobe 1 is the broad flake lobe: F0 tinted by the base colour, roughness 0.25-0.5. Flake
+//! Lobe 1 is the broad flake lobe: F0 tinted by the base colour, roughness 0.2-0.5. Flake
 //! sparkle is per-flake variation of that lobe: flakes are cells of periodic Worley noise at
 //! a fixed density per unit (independent of the resolution; near one flake per texel at
 //! 256²), each with its own brightness (most dim, a few glinting) and roughness (its tilt
@@ -42,7 +42,7 @@ impl Default for CarPaint {
 /// One member of the family.
 struct Panel {
     pigment: [f64; 3],
-    /// Mean flake F0 (linear rgb) and how much individual flakes vary.
+    /// Mean flake F0, linear rgb.
     flake: [f64; 3],
     /// Fraction of flakes that glint, and how much brighter they are.
     glints: f64,
@@ -79,7 +79,7 @@ impl CarPaint {
             let flake = scale(srgb(hsv(shift, 0.5, 1.0)), rng.random_range(0.08..0.2));
             (pigment, flake, rng.random_range(0.02..0.06))
         } else {
-            // Solid: no flakes; a weak, broad lobe from the pigment's own binder.
+            // Solid: no flakes, at most a faint broad lobe.
             let pigment = srgb(hsv(hue, saturation, rng.random_range(0.2..0.9)));
             (pigment, [rng.random_range(0.0..0.02); 3], 0.0)
         };

@@ -21,8 +21,10 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
 use super::Family;
-use super::common::{GgxTexel, Pattern, Symmetry, counts, hsv, jitter, mix, sample_maps, scale};
-use super::common::{smoothstep, srgb, wrap01};
+use super::common::{
+    GgxTexel, Pattern, Symmetry, counts, hsv, jitter, mix, sample_maps, scale, smoothstep, srgb,
+    wrap01,
+};
 use super::noise::{PeriodicNoise, mix64, unit_f64};
 
 /// Configuration of the fabric family; every field has a documented default.

@@ -5,15 +5,18 @@
 //! parallel lanes of strokes (lanes wobble, so they are never ruled lines); each stroke
 //! starts with a load of paint that thins towards its end, leaves fine striations from the
 //! bristles along its length and ridges where paint was pushed to its edges and its start.
-//! Thicker paint levels out smoother, so the gloss varies slightly with the paint thickness.
-//! Under it, low-frequency fBm bumps stand for the substrate. Paint is a dielectric (binder
+//! Neighbouring strokes overlap softly (their paint is blended over a narrow band) and end
+//! raggedly, since every bristle lifts off at its own place. Thicker paint levels out
+//! smoother, so the gloss varies slightly with the paint thickness; on some members the
+//! brush ran dry and the primer shows where the film is thinnest. Under it all,
+//! low-frequency fBm bumps stand for the substrate. Paint is a dielectric (binder
 //! n ≈ 1.5: grey F0 0.04-0.05); roughness by finish: matte 0.55-0.75, eggshell 0.38-0.5,
 //! satin 0.25-0.38, gloss 0.1-0.22.
 //!
 //! Maps for `height(ggx, scale=relief)`: diffuse, specular, roughness, height.
 //! Per seed: paint colour (any hue, from greys to saturated), finish, stroke direction
-//! (0°, 45°, 90°, 135°), lane width, stroke length, bristle density, ridge strength,
-//! substrate unevenness.
+//! (0°, 45°, 90°, 135°), lane width and wobble, stroke length, bristle density, ridge
+//! strength, dry brushing, primer grey, substrate unevenness.
 
 use candle_core::Device;
 use photomat_core::{MaterialMaps, Result};

@@ -22,9 +22,8 @@ use rand::{Rng, SeedableRng};
 
 use super::Family;
 use super::cellular::PeriodicCells;
-use super::common::srgb;
 use super::common::{
-    GgxTexel, Pattern, Symmetry, counts, jitter, mix, sample_maps, scale, smoothstep,
+    GgxTexel, Pattern, Symmetry, counts, jitter, mix, sample_maps, scale, smoothstep, srgb,
 };
 use super::noise::PeriodicNoise;
 
@@ -222,7 +221,7 @@ impl Pattern for Slab {
                 let main = 1.0 - smoothstep(0.0, *width, n3.fbm(wx, wy, 2, 5).abs());
                 let fine = 1.0 - smoothstep(0.0, 0.4 * width, n3.fbm(wx, wy, 5, 3).abs());
                 let veins = (main + 0.5 * fine).min(1.0); // crossing veins are no more than opaque
-                let body = scale(*body, 1.0 + 0.12 * cloud);
+                let body = scale(*body, 1.0 + 0.15 * cloud);
                 let diffuse = mix(body, *vein, contrast * veins);
                 // Polished: a hair rougher and lower along veins (softer filling minerals).
                 (

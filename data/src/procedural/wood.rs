@@ -4,8 +4,8 @@
 //! Imitates a sanded, varnished board or plank floor seen from above. Growth rings are
 //! iso-lines of the distance across the grain, wobbled by low-frequency periodic noise into
 //! the arches of flat-sawn figure; each ring is light earlywood that darkens gradually into
-//! latewood and ends abruptly at the next ring. Pores are fine dark streaks along the grain
-//! that sit slightly below the surface. The varnish is the specular lobe: a grey dielectric
+//! latewood and ends abruptly at the next ring. Pores are fine dark dashes along the grain
+//! that sit slightly below the surface, over faint fibre streaks. The varnish is the specular lobe: a grey dielectric
 //! F0 ≈ 0.04 (n ≈ 1.5) from satin to gloss, rougher in pores and joints.
 //!
 //! Maps for `height(ggx, scale=relief)`: diffuse, specular, roughness, height.
@@ -21,9 +21,8 @@ use rand::{Rng, SeedableRng};
 
 use super::Family;
 use super::common::{
-    GgxTexel, Pattern, Symmetry, counts, jitter, mix, sample_maps, scale, smoothstep,
+    GgxTexel, Pattern, Symmetry, counts, jitter, mix, sample_maps, scale, smoothstep, srgb, wrap01,
 };
-use super::common::{srgb, wrap01};
 use super::noise::{PeriodicNoise, mix64, unit_f64};
 
 /// Configuration of the wood family; every field has a documented default.
