@@ -48,3 +48,36 @@ fn demo_is_deterministic_per_seed() {
     assert_eq!(bytes(&a), bytes(&b));
     assert_ne!(bytes(&a), bytes(&c));
 }
+
+#[test]
+fn demo_family_picks_the_model_and_unknown_families_are_listed() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().to_str().unwrap();
+    photomat_cli::run_with_output(
+        [
+            "photomat",
+            "demo",
+            "--out",
+            out,
+            "--size",
+            "32",
+            "--family",
+            "car_paint",
+        ],
+        &mut Vec::new(),
+    )
+    .unwrap();
+    let material = load_maps(&dir.path().join("material"), None).unwrap();
+    assert_eq!(material.brdf.name(), "coated");
+    let err = photomat_cli::run_with_output(
+        ["photomat", "demo", "--out", out, "--family", "marble"],
+        &mut Vec::new(),
+    )
+    .err()
+    .expect("unknown family must fail")
+    .to_string();
+    assert!(
+        err.contains("'marble'") && err.contains("car_paint, fabric"),
+        "{err}"
+    );
+}

@@ -1,7 +1,8 @@
 //! `photomat demo`: the bundled default job before any trained model exists. Generates a
-//! procedural, tileable material (glazed tiles for `height(ggx)`), writes it as a material
-//! folder and shows it: a render under the centred flash, an orbit contact sheet, and a sheet
-//! of its maps (diffuse, specular, roughness, derived normal, height).
+//! procedural, tileable material of one of the simulator's families (glazed tiles by default),
+//! writes it as a material folder and shows it: a render under the centred flash, an orbit
+//! contact sheet, and a sheet of its maps (e.g. diffuse, specular, roughness, derived normal,
+//! height).
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -11,7 +12,7 @@ use candle_core::Device;
 use photomat_core::image_io::{PngBits, contact_sheet, write_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
 use photomat_core::{Highlight, lookup, render};
-use photomat_data::procedural::{Family, GlazedTiles};
+use photomat_data::procedural::{family, family_names};
 
 use super::previews::map_previews;
 use super::render::orbit;
@@ -26,6 +27,10 @@ pub struct Args {
     #[arg(long, default_value_t = 256, value_parser = clap::value_parser!(u32).range(8..=4096))]
     pub size: u32,
 
+    // The help text lists the registered families.
+    #[arg(long, default_value = "tiles", help = family_help())]
+    pub family: String,
+
     /// Seed of the procedural material: the same seed gives the same material.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -35,8 +40,12 @@ pub struct Args {
     pub orbit: u32,
 }
 
+fn family_help() -> String {
+    format!("Procedural family: {}", family_names().join(", "))
+}
+
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let family = GlazedTiles::default();
+    let family = family(&args.family)?;
     let brdf = lookup(&family.brdf())?;
     let size = args.size as usize;
     let maps = family.generate(size, args.seed, &Device::Cpu)?;
@@ -81,7 +90,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     writeln!(
         out,
         "procedural material '{}' (seed {}, {size}×{size}), model {}",
-        "glazed tiles",
+        family.name(),
         args.seed,
         brdf.name()
     )?;
