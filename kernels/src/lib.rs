@@ -5,6 +5,8 @@
 //! PyTorch CPU (DESIGN §6); the generator and the estimator call these ops instead where they
 //! measure faster (numbers in `docs/benchmarks.md`).
 //!
+//! - [`conv2d`]: im2col + `gemm` convolution with zero or circular padding, forward, input
+//!   gradient and weight gradient each a custom op, differentiable to any order ([`conv`]).
 //! - [`conv2d_fast_backward`]: unpadded strided `conv2d` whose input gradient is a polyphase
 //!   `conv2d` instead of candle's slow direct-loop `conv_transpose2d` ([`conv_grad`]).
 //! - [`leaky_relu`]: LeakyReLU as one fused element-wise pass each way ([`activation`]).
@@ -16,8 +18,10 @@
 
 pub mod activation;
 pub mod alloc;
+pub mod conv;
 pub mod conv_grad;
 pub mod testing;
 
 pub use activation::leaky_relu;
+pub use conv::{Conv2dSpec, PaddingMode, conv2d, conv2d_reference};
 pub use conv_grad::conv2d_fast_backward;
