@@ -1,11 +1,12 @@
 //! Convolution with circular padding: the reference's `CircularConv2d`.
 //!
 //! PhotoMat's estimator (paper §4 "Implementation"; reference `training/networks.py`,
-//! `CircularConv2d`) pads every convolution's input by wrapping around
-//! ([`crate::circular_pad()`]) and then convolves without padding. Here the parameters live in
-//! candle-nn's [`Conv2d`] (`padding = 0`); the convolution is candle's `conv2d` with the
-//! faster CPU backward of [`photomat_kernels::conv_grad`] (same values, input gradient by `conv2d`
-//! instead of candle's slow direct-loop `conv_transpose2d`).
+//! `CircularConv2d`) pads every convolution's input by wrapping around and then convolves
+//! without padding. Here the parameters live in candle-nn's [`Conv2d`] (`padding = 0`); the
+//! convolution is [`photomat_kernels::conv2d`] with circular padding, which reads the wrapped
+//! texels inside its im2col instead of building a padded copy (the same values as
+//! [`crate::circular_pad()`] followed by an unpadded conv; 4–5× faster than candle's `conv2d`
+//! forward and backward on the CPU, `docs/benchmarks.md`).
 //!
 //! Each layer keeps the size up to its stride ("same" convolution on the torus): a `k × k`
 //! kernel with stride `s` is padded by `(k − s)/2` on every side, so (H, W) → (H/s, W/s).
@@ -18,8 +19,7 @@
 use candle_core::{Result, Tensor, bail};
 use candle_nn::{Conv2d, Conv2dConfig, Init, Module, VarBuilder};
 
-use crate::circular_pad::circular_pad;
-use photomat_kernels::conv2d_fast_backward;
+use photomat_kernels::{Conv2dSpec, conv2d};
 
 /// Standard deviation of the initial biases (the reference's `bias.data.normal_(0, 0.02)`).
 const BIAS_INIT_STD: f64 = 0.02;
@@ -102,7 +102,8 @@ impl Module for CircularConv2d {
                 self.stride
             );
         }
-        let y = conv2d_fast_backward(&circular_pad(x, self.pad)?, self.conv.weight(), self.stride)?;
+        let spec = Conv2dSpec::circular(self.stride, self.pad);
+        let y = conv2d(x, self.conv.weight(), spec)?;
         match self.conv.bias() {
             Some(bias) => y.broadcast_add(&bias.reshape((1, (), 1, 1))?),
             None => Ok(y),
@@ -193,6 +194,33 @@ mod tests {
         );
         // Border texels lose ≥ 3 of 9 taps of O(1) inputs with O(0.1) weights.
         assert!(period_error(&zero_padded.forward(&x)?)? > 1e-3);
+        Ok(())
+    }
+
+    #[test]
+    fn circular_conv_gradients_match_circular_pad_then_candle_conv() -> Result<()> {
+        // The layer's gradients (photomat-kernels' backward) against candle's backward of
+        // the documented composition circular_pad + unpadded conv2d. f64 sums of ≤ 2·3·16·32
+        // O(1) products in another order: rounding ≲ 1e-13.
+        use candle_core::Var;
+        for (k, s) in [(3, 1), (4, 2)] {
+            let conv = layer(3, 5, k, s)?;
+            let x = Var::from_tensor(&pseudo_random((2, 3, 8, 12), 4, DType::F64, &Device::Cpu)?)?;
+            let w = conv.conv().weight();
+            let g = pseudo_random((2, 5, 8 / s, 12 / s), 5, DType::F64, &Device::Cpu)?;
+            let ours = (conv.forward(x.as_tensor())? * &g)?.sum_all()?.backward()?;
+            let padded = crate::circular_pad(x.as_tensor(), conv.pad())?;
+            let reference = (padded.conv2d(w, 0, s, 1, 1)? * &g)?
+                .sum_all()?
+                .backward()?;
+            for t in [x.as_tensor(), w] {
+                let (a, b) = (
+                    ours.get(t).expect("gradient"),
+                    reference.get(t).expect("gradient"),
+                );
+                assert!(max_abs_diff(a, b)? < 1e-10, "k{k} s{s}");
+            }
+        }
         Ok(())
     }
 

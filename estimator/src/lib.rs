@@ -11,10 +11,10 @@
 //! ranges (applying the reference's tanh head exactly once, see [`unet`]).
 //!
 //! - [`Estimator`] / [`EstimatorConfig`]: the UNet ([`unet`]).
-//! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]), differentiated
-//!   with [`conv2d_fast_backward`] ([`conv_grad`], from `photomat-kernels`): candle's CPU
-//!   input gradient of `conv2d` is ≈ 10× slower than its forward; the polyphase `conv2d`
-//!   form is not.
+//! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]) on
+//!   [`photomat_kernels::conv2d`] (im2col + gemm custom ops, 4–5× faster than candle's CPU
+//!   `conv2d` forward and backward). [`conv2d_fast_backward`] ([`conv_grad`]) remains
+//!   available for unpadded convs.
 //! - [`circular_pad()`]: wrap-around padding by `narrow` + `cat` ([`mod@circular_pad`]).
 //! - [`leaky_relu`]: the activation as one fused element-wise pass each way ([`activation`],
 //!   from `photomat-kernels`).
