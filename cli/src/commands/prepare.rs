@@ -42,7 +42,8 @@ pub struct Args {
 }
 
 pub(crate) fn parse_detector(name: &str) -> Result<DetectorKind, String> {
-    name.parse().map_err(|e: photomat_core::Error| e.to_string())
+    name.parse()
+        .map_err(|e: photomat_core::Error| e.to_string())
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {

@@ -100,9 +100,11 @@ pub fn evaluate(
         ProgressBar::hidden()
     };
     bar.set_style(
-        ProgressStyle::with_template("{spinner} detecting [{bar:30}] {pos}/{len} photos, eta {eta}")
-            .expect("static template")
-            .progress_chars("=> "),
+        ProgressStyle::with_template(
+            "{spinner} detecting [{bar:30}] {pos}/{len} photos, eta {eta}",
+        )
+        .expect("static template")
+        .progress_chars("=> "),
     );
     // Per photo: per detector (error px, fell back).
     let errors: Vec<Vec<(f64, bool)>> = with_truth
@@ -115,9 +117,9 @@ pub fn evaluate(
             let per_detector = built
                 .iter()
                 .map(|d| {
-                    let detection = d.detect(&image).map_err(|e| {
-                        Error::file(dataset.image_path(i), e)
-                    })?;
+                    let detection = d
+                        .detect(&image)
+                        .map_err(|e| Error::file(dataset.image_path(i), e))?;
                     Ok((
                         detection.error_px(row, col),
                         detection.status == DetectionStatus::FallbackCentre,

@@ -127,7 +127,9 @@ impl DatasetIndex {
         let text = std::fs::read_to_string(&path).map_err(|e| {
             Error::file(
                 &path,
-                format!("cannot read the dataset index ({e}); is this a `photomat prepare` folder?"),
+                format!(
+                    "cannot read the dataset index ({e}); is this a `photomat prepare` folder?"
+                ),
             )
         })?;
         let index: Self = serde_json::from_str(&text)
@@ -172,11 +174,18 @@ impl DatasetIndex {
                     p.image
                 ));
             }
-            let finite = p.highlight_px.iter().chain(&p.highlight).all(|v| v.is_finite())
+            let finite = p
+                .highlight_px
+                .iter()
+                .chain(&p.highlight)
+                .all(|v| v.is_finite())
                 && p.truth_highlight_px
                     .is_none_or(|t| t.iter().all(|v| v.is_finite()));
             if !finite {
-                return Err(format!("photo {i} ('{}'): a highlight is not finite", p.image));
+                return Err(format!(
+                    "photo {i} ('{}'): a highlight is not finite",
+                    p.image
+                ));
             }
         }
         Ok(())
@@ -311,9 +320,17 @@ mod tests {
         index.photos[0].image = "../escape.png".into();
         index.write(dir.path()).unwrap();
         let err = DatasetIndex::read(dir.path()).unwrap_err().to_string();
-        assert!(err.contains("index.json") && err.contains("inside the dataset"), "{err}");
+        assert!(
+            err.contains("index.json") && err.contains("inside the dataset"),
+            "{err}"
+        );
 
-        let err = FlashDataset::open(dir.path().join("nothing")).unwrap_err().to_string();
-        assert!(err.contains("index.json") && err.contains("photomat prepare"), "{err}");
+        let err = FlashDataset::open(dir.path().join("nothing"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("index.json") && err.contains("photomat prepare"),
+            "{err}"
+        );
     }
 }

@@ -166,7 +166,11 @@ fn sniff(bytes: &[u8]) -> Result<ImageFormat, Rejection> {
         Ok(f @ (ImageFormat::Jpeg | ImageFormat::Png)) => Ok(f),
         Ok(other) => reject(format!(
             "unsupported image format {}: photomat prepare reads JPEG and PNG",
-            other.extensions_str().first().unwrap_or(&"?").to_uppercase()
+            other
+                .extensions_str()
+                .first()
+                .unwrap_or(&"?")
+                .to_uppercase()
         )),
         Err(_) => reject("not an image: the content is neither JPEG nor PNG"),
     }
@@ -311,6 +315,9 @@ mod tests {
         let truncated = check_jpeg(&jpeg[..jpeg.len() - 10]).unwrap_err();
         assert!(truncated.0.starts_with("truncated JPEG"), "{truncated}");
         let headers_only = check_jpeg(&jpeg[..40]).unwrap_err();
-        assert!(headers_only.0.starts_with("truncated JPEG"), "{headers_only}");
+        assert!(
+            headers_only.0.starts_with("truncated JPEG"),
+            "{headers_only}"
+        );
     }
 }

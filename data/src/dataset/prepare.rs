@@ -138,7 +138,9 @@ pub fn prepare(photos: &Path, out: &Path, options: &PrepareOptions) -> Result<Pr
         index.photos.iter().any(|p| {
             p.source == f.key && p.source_bytes == f.bytes && p.source_modified == f.modified
         }) || index.rejected.iter().any(|r| {
-            r.source == f.key && r.source_bytes == Some(f.bytes) && r.source_modified == Some(f.modified)
+            r.source == f.key
+                && r.source_bytes == Some(f.bytes)
+                && r.source_modified == Some(f.modified)
         })
     };
     let todo: Vec<SourceFile> = files.iter().filter(|f| !known(f)).cloned().collect();
@@ -289,9 +291,18 @@ pub fn image_name(source: &str) -> String {
     // Keep names portable: anything but ASCII alphanumerics, '-' and '_' becomes '_'.
     let stem: String = stem
         .chars()
-        .map(|c| if c.is_ascii_alphanumeric() || c == '-' || c == '_' { c } else { '_' })
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
         .collect();
-    format!("{IMAGES_DIR}/{stem}-{:08x}.png", (hash ^ (hash >> 32)) as u32)
+    format!(
+        "{IMAGES_DIR}/{stem}-{:08x}.png",
+        (hash ^ (hash >> 32)) as u32
+    )
 }
 
 /// Decode, prepare, detect and write one photo. `Ok(Rejected)` for a bad file; `Err` only for
@@ -333,7 +344,9 @@ fn process(
         .ok()
         .and_then(|p| truth.get(&p))
         .map(|t| {
-            let (r, c) = prepared.transform.apply(t.highlight_px[0], t.highlight_px[1]);
+            let (r, c) = prepared
+                .transform
+                .apply(t.highlight_px[0], t.highlight_px[1]);
             [r, c]
         });
     let (row, col) = detection.pixel();
@@ -453,7 +466,10 @@ mod tests {
     fn image_names_are_stable_and_portable() {
         let a = image_name("/photos/IMG 0001.JPG");
         assert_eq!(a, image_name("/photos/IMG 0001.JPG"));
-        assert!(a.starts_with("images/IMG_0001-") && a.ends_with(".png"), "{a}");
+        assert!(
+            a.starts_with("images/IMG_0001-") && a.ends_with(".png"),
+            "{a}"
+        );
         assert_ne!(a, image_name("/other/IMG 0001.JPG"));
         assert_eq!(a.len(), "images/IMG_0001-".len() + 8 + 4);
     }

@@ -145,7 +145,10 @@ mod tests {
         assert_eq!(truth.len(), 1);
         let key = photos.join("000000.png").canonicalize().unwrap();
         let t = truth.get(&key).unwrap();
-        assert_eq!((t.highlight_px, t.family.as_deref()), ([30.5, 33.0], Some("wood")));
+        assert_eq!(
+            (t.highlight_px, t.family.as_deref()),
+            ([30.5, 33.0], Some("wood"))
+        );
 
         std::fs::write(dir.path().join(SIMULATION_FILE), "{ not json").unwrap();
         let err = SimulationTruth::find(&photos).unwrap_err().to_string();

@@ -195,7 +195,10 @@ mod tests {
             assert_eq!(kind.build().name(), kind.name());
         }
         let err = "best".parse::<DetectorKind>().unwrap_err().to_string();
-        assert!(err.contains("'best'") && err.contains("paper, robust"), "{err}");
+        assert!(
+            err.contains("'best'") && err.contains("paper, robust"),
+            "{err}"
+        );
     }
 
     #[test]
@@ -207,6 +210,9 @@ mod tests {
         let h = Detection::detected(100.5, 300.25, 512, 512).highlight();
         assert_eq!(h, Highlight::from_pixel_on(100.5, 300.25, 512, PHOTO_SIDE));
         let f = Detection::fallback(512, 512, "why");
-        assert_eq!((f.pixel(), f.status), ((256.0, 256.0), DetectionStatus::FallbackCentre));
+        assert_eq!(
+            (f.pixel(), f.status),
+            ((256.0, 256.0), DetectionStatus::FallbackCentre)
+        );
     }
 }

@@ -124,18 +124,21 @@ mod tests {
 
     #[test]
     fn paper_finds_the_centre_of_a_bright_square() {
-        let d = PaperDetector::default().detect(&spot(64, 20, 40, 4)).unwrap();
+        let d = PaperDetector::default()
+            .detect(&spot(64, 20, 40, 4))
+            .unwrap();
         assert_eq!(d.status, DetectionStatus::Detected);
         // Pixels 16..24 have centres 16.5..23.5: their mean is 20.0.
-        assert!((d.row - 20.0).abs() < 1e-9 && (d.col - 40.0).abs() < 1e-9, "{d:?}");
+        assert!(
+            (d.row - 20.0).abs() < 1e-9 && (d.col - 40.0).abs() < 1e-9,
+            "{d:?}"
+        );
     }
 
     #[test]
     fn paper_falls_back_on_flat_spread_and_far_images() {
         let detector = PaperDetector::default();
-        let flat = detector
-            .detect(&PlanarImage::filled(3, 8, 8, 0.5))
-            .unwrap();
+        let flat = detector.detect(&PlanarImage::filled(3, 8, 8, 0.5)).unwrap();
         assert_eq!(flat.status, DetectionStatus::FallbackCentre);
         assert!(flat.reason.unwrap().contains("flat"));
         // Everything bright but one dark corner: 15/16 of the pixels above the mean.

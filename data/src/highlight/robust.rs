@@ -172,10 +172,17 @@ impl HighlightDetector for RobustDetector {
             ));
         };
         if !(fit.lx.is_finite() && fit.ly.is_finite()) {
-            return Ok(Detection::fallback(h, w, "the flash model fit did not converge"));
+            return Ok(Detection::fallback(
+                h,
+                w,
+                "the flash model fit did not converge",
+            ));
         }
         let scale = w as f64 / PHOTO_SIDE;
-        let (row, col) = (h as f64 / 2.0 - fit.ly * scale, w as f64 / 2.0 + fit.lx * scale);
+        let (row, col) = (
+            h as f64 / 2.0 - fit.ly * scale,
+            w as f64 / 2.0 + fit.lx * scale,
+        );
         let offset = fit.lx.hypot(fit.ly) / PHOTO_SIDE;
         if offset > self.max_offset {
             return Ok(Detection::fallback(
@@ -258,8 +265,7 @@ impl RobustDetector {
             fit = next;
             weights = reweight(&cells, &fit, floor);
         }
-        let (lx, ly) =
-            refine_peak(&intensity, h, w, &fit, &cells).unwrap_or((fit.p[0], fit.p[1]));
+        let (lx, ly) = refine_peak(&intensity, h, w, &fit, &cells).unwrap_or((fit.p[0], fit.p[1]));
         Ok(Some(FlashFit {
             lx,
             ly,
@@ -289,7 +295,10 @@ impl RobustDetector {
                 }
                 let row = (bi as f64 + 0.5) * kr as f64;
                 let col = (bj as f64 + 0.5) * kc as f64;
-                let (x, y) = ((col - w as f64 / 2.0) * scale, (h as f64 / 2.0 - row) * scale);
+                let (x, y) = (
+                    (col - w as f64 / 2.0) * scale,
+                    (h as f64 / 2.0 - row) * scale,
+                );
                 let cos2 = 1.0 / (1.0 + x * x + y * y);
                 cells.push(Cell {
                     x,
@@ -466,9 +475,7 @@ fn brightest(cells: &[Cell]) -> Option<(f64, f64)> {
 /// 1 inside the largest square centred on (lx, ly) within the photo (half-side at least
 /// [`MIN_DOMAIN_HALF`]), 0 outside.
 fn domain_weights(cells: &[Cell], lx: f64, ly: f64, half_h: f64) -> Vec<f64> {
-    let half = (1.0 - lx.abs())
-        .min(half_h - ly.abs())
-        .max(MIN_DOMAIN_HALF);
+    let half = (1.0 - lx.abs()).min(half_h - ly.abs()).max(MIN_DOMAIN_HALF);
     cells
         .iter()
         .map(|c| {
@@ -533,10 +540,9 @@ fn solve(cells: &[Cell], weights: &[f64], p: Params) -> Fit {
         }
         btb += wt * c.y_lin * c.y_lin;
     }
-    for i in 0..3 {
-        for j in 0..i {
-            ata[i][j] = ata[j][i];
-        }
+    // Mirror the upper triangle.
+    for (i, j) in [(1, 0), (2, 0), (2, 1)] {
+        ata[i][j] = ata[j][i];
     }
     // Subsets: both profiles, diffuse only, specular only; with and without ambient light.
     const SUBSETS: [&[usize]; 6] = [&[0, 1, 2], &[0, 2], &[1, 2], &[0, 1], &[0], &[1]];
@@ -557,7 +563,12 @@ fn solve(cells: &[Cell], weights: &[f64], p: Params) -> Fit {
             continue;
         }
         // Weighted SSE = yᵀWy − xᵀAᵀWy at the least-squares solution.
-        let cost = btb - subset.iter().zip(&x).map(|(&i, xi)| xi * atb[i]).sum::<f64>();
+        let cost = btb
+            - subset
+                .iter()
+                .zip(&x)
+                .map(|(&i, xi)| xi * atb[i])
+                .sum::<f64>();
         if cost < best.cost {
             best.coef = coef;
             best.cost = cost.max(0.0);
@@ -684,8 +695,8 @@ fn nelder_mead(cells: &[Cell], weights: &[f64], start: Fit) -> Fit {
         }
         let mut centroid = [0.0; N];
         for f in &simplex[..N] {
-            for k in 0..N {
-                centroid[k] += f.p[k] / N as f64;
+            for (c, p) in centroid.iter_mut().zip(&f.p) {
+                *c += p / N as f64;
             }
         }
         let worst = simplex[N];
@@ -737,8 +748,8 @@ mod tests {
     use super::*;
     use crate::highlight::DetectionStatus;
 
-    /// A noise-free grey photo rendered from the detector's own model.
-    fn synthetic(size: usize, lx: f64, ly: f64, alpha: f64, vignetting: f64) -> PlanarImage {
+    /// A noise-free grey photo rendered from the detector's own model (vignetting v, beam k).
+    fn synthetic(size: usize, lx: f64, ly: f64, alpha: f64, v: f64, k: f64) -> PlanarImage {
         let mut data = Vec::with_capacity(size * size);
         for row in 0..size {
             for col in 0..size {
@@ -747,8 +758,11 @@ mod tests {
                 let s2 = (x - lx).powi(2) + (y - ly).powi(2);
                 let q = 1.0 + s2;
                 let lobe = (alpha * alpha / (alpha * alpha + s2)).powi(2) * q.powf(1.5);
-                let v = 1.0 - vignetting * (x * x + y * y);
-                let lin = v * (0.5 * q.powf(-1.5) + 0.4 * lobe) + 0.01;
+                let cos2 = 1.0 / (1.0 + x * x + y * y);
+                let l2 = lx * lx + ly * ly;
+                let cos_beam = (1.0 + l2 - x * lx - y * ly) / (q.sqrt() * (1.0 + l2).sqrt());
+                let camera = (1.0 - v + v * cos2 * cos2) * cos_beam.powf(k);
+                let lin = camera * (0.5 * q.powf(-1.5) + 0.4 * lobe) + 0.01;
                 data.push(lin.powf(1.0 / 2.2) as f32);
             }
         }
@@ -757,22 +771,33 @@ mod tests {
 
     #[test]
     fn robust_recovers_its_own_model_exactly() {
-        for (lx, ly, alpha) in [(0.1, -0.15, 0.1), (-0.3, 0.2, 0.4), (0.0, 0.0, 0.05)] {
-            let image = synthetic(128, lx, ly, alpha, 0.2);
+        for (lx, ly, alpha, v, k) in [
+            (0.1, -0.15, 0.1, 0.2, 0.5),
+            (-0.3, 0.2, 0.4, 0.4, 1.0),
+            (0.0, 0.0, 0.05, 0.0, 0.0),
+        ] {
+            let image = synthetic(128, lx, ly, alpha, v, k);
             let d = RobustDetector::default().detect(&image).unwrap();
             assert_eq!(d.status, DetectionStatus::Detected, "{d:?}");
             let h = d.highlight();
             // 0.002 plane units = 0.1 % of the width: the grid and f32 input limit the rest.
-            assert!((h.x - lx).abs() < 2e-3 && (h.y - ly).abs() < 2e-3, "{h:?} vs ({lx}, {ly})");
+            assert!(
+                (h.x - lx).abs() < 2e-3 && (h.y - ly).abs() < 2e-3,
+                "{h:?} vs ({lx}, {ly})"
+            );
         }
     }
 
     #[test]
     fn robust_falls_back_on_black_and_flat_images() {
         let detector = RobustDetector::default();
-        let black = detector.detect(&PlanarImage::filled(3, 64, 64, 0.0)).unwrap();
+        let black = detector
+            .detect(&PlanarImage::filled(3, 64, 64, 0.0))
+            .unwrap();
         assert_eq!(black.status, DetectionStatus::FallbackCentre);
-        let flat = detector.detect(&PlanarImage::filled(3, 64, 64, 0.5)).unwrap();
+        let flat = detector
+            .detect(&PlanarImage::filled(3, 64, 64, 0.5))
+            .unwrap();
         assert_eq!(flat.status, DetectionStatus::FallbackCentre, "{flat:?}");
         assert!(flat.reason.unwrap().contains("does not dominate"));
     }
