@@ -32,7 +32,7 @@ pub struct PaperDetector {
     /// width between the highlight and the border).
     pub max_offset: f64,
     /// Largest accepted fraction of pixels above the mean (default 0.6: under a centred flash
-    /// on a uniform matte sample 41 % of a side-2 photo is above the mean; 60 % means no lobe).
+    /// on a uniform matte sample 42 % of a side-2 photo is above the mean; 60 % means no lobe).
     pub max_spread: f64,
 }
 

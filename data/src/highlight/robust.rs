@@ -14,24 +14,48 @@
 //!   `g_s(s; α) = (α²/(α²+s²))² · (1+s²)^(3/2)` (`tan θ = s`; Fresnel and shadowing vary by
 //!   less than 2 % within the photo and are left out).
 //!
-//! The camera multiplies by a vignetting that is radial about the image centre, approximated by
-//! `1 − v·r²` (r = |p|), and ambient light adds a constant. For fixed (l, α) the model
+//! The camera multiplies by two factors centred on the image centre rather than on `l`, which
+//! are what pull the paper's centroid: the cos⁴ law of lens vignetting, mixed in with strength
+//! v (`1 − v + v·cos⁴θ_c`, θ_c the angle off the optical axis), and the flash LED's beam
+//! profile `cos^k β` (β the angle at the flash between the rays to p and to the image centre,
+//! where the phone aims). Ambient light adds a constant. So
 //!
-//! `Y(p) ≈ a·g_d + b·g_s − (a v)·r²·g_d − (b v)·r²·g_s + c`
+//! `Y(p) ≈ [1 − v + v·cos⁴θ_c(p)] · cos^k β(p; l) · (a·g_d + b·g_s(α)) + c`,   a, b, c ≥ 0.
 //!
-//! is linear in its five coefficients (the vignetting is allowed to differ between the two
-//! terms), so they are solved exactly by weighted least squares (variable projection), and only
-//! (lₓ, l_y, ln α) are searched, by Nelder–Mead from the best of a few starts.
+//! For fixed (l, α, v, k) the model is linear in (a, b, c), solved exactly by weighted
+//! non-negative least squares (variable projection); only (lₓ, l_y, ln α, v, k) are searched,
+//! by Nelder–Mead from the best of a 9×9 grid of positions over the central half of the photo
+//! plus three data-driven starts (brightest blurred cell, the paper's centroid, the centroid of
+//! saturated cells), each with 7 lobe widths.
 //!
 //! # Data and weights
-//! Y is the paper's intensity (linear min(R,G,B)) averaged over blocks of a ~[`RobustDetector::grid`]²
-//! grid. Saturated blocks carry no magnitude and are left out. Residuals are relative (texture
-//! multiplies the flash falloff) and down-weighted with Cauchy weights, re-estimated four times
-//! (IRLS), so grout lines, dark knots and sparkles do not drag the fit. Every fit uses only the
-//! largest square centred on the current estimate that lies inside the image (at least
-//! [`MIN_DOMAIN_HALF`] wide): a radial profile fitted over a domain symmetric about its centre has no
-//! reason to shift towards the larger side, so profile mismatch (two-lobe car paint, bumpy
-//! normals) does not bias the position.
+//! Y is the paper's intensity (linear min(R,G,B)) averaged over blocks of a
+//! ~[`RobustDetector::grid`]² grid. Saturated blocks carry no magnitude and are left out.
+//! Residuals are weighted as photon noise (variance ∝ signal: weight 1/Y, which lets a bright,
+//! sparse lobe such as a brushed-metal streak outweigh a dim background) and down-weighted with
+//! Cauchy weights re-estimated every round (IRLS), so grout lines, dark specks and sparkles do
+//! not drag the fit. The first three rounds fit the whole photo; the last two only the largest
+//! square centred on the estimate that lies inside it (at least [`MIN_DOMAIN_HALF`] wide), so a
+//! lobe whose shape the model does not match (two-lobe car paint, bumpy normals) is still
+//! centred: a radial profile fitted on a domain symmetric about its centre has no reason to
+//! shift towards the larger side. A polishing round that moves the estimate by more than
+//! 2.5 % of the width is discarded.
+//!
+//! # Clipped highlights
+//! When the fitted lobe is compact (α ≤ 0.25), distinct (its peak at least half the diffuse +
+//! ambient level) and at least 4 saturated cells lie within 3α of it, the model cannot see the
+//! lobe's core. The position is then refined by mean shift on the full-resolution specular
+//! residual (intensity minus the fitted diffuse and ambient part): the centroid of its top half
+//! within a square window of half-side 3α, re-centred until it moves less than 0.01 pixel.
+//!
+//! # Accuracy (mean / max error, % of the width)
+//! `photomat simulate --count 64 --size 512` (seed 0, jitter σ = 4 %), then `prepare` and
+//! `eval-detector`: robust 0.75 / 4.5, paper 1.41 / 4.6. By family, robust vs paper:
+//! brushed metal 1.48 / 1.17 (the streak of sparse glints is the model's weak case), car paint
+//! 0.09 / 0.56, fabric 1.00 / 1.65, leather 0.17 / 0.44, paint 0.43 / 1.84, stone 0.94 / 2.25,
+//! tiles 1.74 / 1.82 (wavy glaze tilts the specular spot off the flash point), wood 0.16 / 1.54.
+//! Test `robust_beats_paper_on_simulated_photos` (independent camera model, 48 photos at 512²):
+//! robust 0.62, paper 1.49.
 //!
 //! # Failure rule
 //! Falls back to the image centre, with the reason, when
