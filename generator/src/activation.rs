@@ -11,8 +11,10 @@
 //! requires. Derivative: `g` for x > 0, `g·a` for x < 0; at exactly 0 candle's `relu`
 //! derivative is 1 (`x ≥ 0`), so the derivative there is `g`.
 //!
-//! TODO(kernels): switch to photomat-kernels' fused LeakyReLU once it provides a
-//! twice-differentiable backward; the fused op of the estimator is first-order only.
+//! photomat-kernels' fused LeakyReLU is not used: its backward is a `no_bwd` custom op, so a
+//! gradient through it cannot be differentiated again, which the R1 penalty (through D) and
+//! path-length regularisation (through G) need. It could serve G's and M's plain
+//! (non-regularised) passes once a trainer selects the op per pass.
 
 use candle_core::{Result, Tensor, bail};
 

@@ -11,7 +11,7 @@
 //! ```
 //!
 //! Every conv and fc is an equalised-lr layer ([`crate::equalized`], λ = 1, biases 0) followed
-//! by `lrelu` except the skip and the output. Downsampling uses the [1,3,3,1] FIR filter
+//! by `lrelu` except the skip and the output. Downsampling uses the `[1,3,3,1]` FIR filter
 //! ([`crate::fir`]) exactly as StyleGAN2's `conv2d_resample`: blur then stride-2 conv for the
 //! 3×3 conv1, filter-and-decimate then 1×1 for the skip. D pads with zeros: it judges real
 //! crops, which are not periodic, so it is the same in tileable mode.

@@ -11,7 +11,7 @@
 //!
 //! - Each conv is a demodulated [`ModulatedConv2d`] 3×3, followed by per-pixel noise
 //!   ([`crate::noise`]), a bias and `lrelu` ([`crate::activation`]).
-//! - The up-sampling conv0 is StyleGAN2's transposed 3×3 conv followed by the [1,3,3,1] filter;
+//! - The up-sampling conv0 is StyleGAN2's transposed 3×3 conv followed by the `[1,3,3,1]` filter;
 //!   both are linear shift-invariant operators on the zero-stuffed signal, so they commute:
 //!   here the FIR upsampling ([`crate::fir::upsample2d`]) runs first and an ordinary 3×3
 //!   conv follows (same operator, no transposed conv, and it wraps around in tileable mode).

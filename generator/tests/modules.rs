@@ -345,3 +345,39 @@ fn fir_matches_stylegan2_upfirdn_and_preserves_constants() -> Result<()> {
     );
     Ok(())
 }
+
+#[test]
+fn generator_and_relight_gradients_reach_every_parameter() -> Result<()> {
+    // A detached or unused parameter would get no (or a zero) gradient: every trainable
+    // variable of G and M must receive a finite, non-zero one from an image loss.
+    let dev = Device::Cpu;
+    let cfg = tiny(32, 1.0 / 64.0);
+    let vm = VarMap::new();
+    let vb = VarBuilder::from_varmap(&vm, DType::F32, &dev);
+    let g = Generator::new(&cfg, vb.pp("g"))?;
+    let m = Relight::new(&cfg, vb.pp("m"))?;
+    let z = seeded_uniform((2, 512), 11, DType::F32, &dev)?;
+    let omega = seeded_uniform((2, 3, 32, 32), 12, DType::F32, &dev)?;
+    let rgb = m.forward(&g.forward(&z, 1.0, &NoiseInput::Random)?, &omega)?;
+    let grads = rgb.sqr()?.mean_all()?.backward()?;
+    let names: Vec<String> = {
+        let data = vm.data().lock().expect("lock");
+        let mut n: Vec<String> = data.keys().cloned().collect();
+        n.sort();
+        n
+    };
+    let trainable = photomat_generator::trainable_vars(&vm);
+    assert_eq!(trainable.len(), names.len() - 1, "only w_avg is a buffer");
+    for name in names.iter().filter(|n| !photomat_generator::is_buffer(n)) {
+        let var = vm.data().lock().expect("lock")[name].clone();
+        let g = grads
+            .get(var.as_tensor())
+            .unwrap_or_else(|| panic!("{name} has no gradient"));
+        let size = max_abs(g)?;
+        assert!(
+            size.is_finite() && size > 0.0,
+            "{name}: gradient magnitude {size}"
+        );
+    }
+    Ok(())
+}
