@@ -173,6 +173,12 @@ impl Discriminator {
         }
         let vb = vb.pp(format!("b{BASE_RESOLUTION}"));
         let c4 = cfg.channels_at(BASE_RESOLUTION);
+        if c4 % cfg.mbstd_channels != 0 {
+            bail!(
+                "discriminator: {} minibatch-stddev channels do not divide the {c4} features at 4²",
+                cfg.mbstd_channels
+            );
+        }
         let conv = dconv(
             c4 + cfg.mbstd_channels,
             c4,

@@ -14,7 +14,9 @@
 //! - The up-sampling conv0 is StyleGAN2's transposed 3×3 conv followed by the `[1,3,3,1]` filter;
 //!   both are linear shift-invariant operators on the zero-stuffed signal, so they commute:
 //!   here the FIR upsampling ([`crate::fir::upsample2d`]) runs first and an ordinary 3×3
-//!   conv follows (same operator, no transposed conv, and it wraps around in tileable mode).
+//!   conv follows: the same operator up to the alignment of the output grid (at most one
+//!   texel) and the border handling, with no transposed conv, and it wraps around in
+//!   tileable mode.
 //! - toFeature layers (StyleGAN2's toRGB with `feature_channels` = 32 outputs) are 1×1
 //!   modulated convs without demodulation, plus bias, no activation; their outputs are summed
 //!   through FIR upsampling and the sum at the last block is F (no activation).

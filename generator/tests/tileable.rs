@@ -5,6 +5,8 @@ use candle_core::{DType, Device, Tensor};
 use candle_nn::{VarBuilder, VarMap};
 use photomat_generator::{Generator, GeneratorConfig, NoiseInput, seeded_uniform};
 
+mod common;
+
 const RES: usize = 32;
 
 fn config(tileable: bool) -> GeneratorConfig {
@@ -70,10 +72,11 @@ fn periodicity(g: &Generator, vars: &VarMap) -> Result<(f64, f64, f64)> {
     Ok((ratios.0, ratios.1, f64::from(err / scale)))
 }
 
-/// The periodicity criterion: seams look like the interior, and rolls commute with G up to
+/// The periodicity criterion: seam differences within −20 % … +25 % of interior neighbour
+/// differences (each ratio averages 2·32·32 texel pairs), and rolls commute with G up to
 /// f32 rounding (sums reordered by the wrapped FIR taps: ≪ 1e-4 relative).
 fn is_periodic((lr, tb, roll): (f64, f64, f64)) -> bool {
-    (0.5..1.5).contains(&lr) && (0.5..1.5).contains(&tb) && roll < 1e-4
+    (0.8..1.25).contains(&lr) && (0.8..1.25).contains(&tb) && roll < 1e-4
 }
 
 #[test]
@@ -84,6 +87,14 @@ fn generator_tileable_output_is_periodic() -> Result<()> {
     let vb = VarBuilder::from_varmap(&vars, DType::F32, &Device::Cpu);
     let tileable = Generator::new(&config(true), vb.pp("g"))?;
     let plain = Generator::new(&config(false), vb.pp("g"))?;
+    // Initial spreads: 1/λ = 100 for the mapping layers (λ = 0.01), 1 elsewhere.
+    common::reseed(&vars, 3, |name| {
+        if name.contains(".mapping.") {
+            100.0
+        } else {
+            1.0
+        }
+    })?;
     for (name, var) in vars.data().lock().expect("lock").iter() {
         if name.ends_with("noise_strength") {
             var.set(&Tensor::new(&[0.5f32], &Device::Cpu)?)?;
@@ -96,9 +107,9 @@ fn generator_tileable_output_is_periodic() -> Result<()> {
         !is_periodic(p),
         "the zero-padded G must fail the same check: {p:?}"
     );
-    // The zero-padded G's failure is the roll equivariance at the borders, not a close call
-    // (measured: relative roll error 2.7e-7 tileable, 0.56 zero-padded; the seam ratios,
-    // 0.86/1.00 tileable and 0.99/1.29 zero-padded, are a weaker signal at random init).
-    assert!(p.2 > 1e-2, "{p:?}");
+    // The zero-padded G fails clearly on the roll and on the left/right seam (measured with
+    // these seeded weights: tileable seam ratios 1.02, 1.06 and relative roll error 2.8e-7;
+    // zero-padded 1.60, 1.29 and 0.79).
+    assert!(p.2 > 1e-2 && p.0 > 1.4, "{p:?}");
     Ok(())
 }
