@@ -1,13 +1,20 @@
-//! LeakyReLU as one fused element-wise pass forward and one backward.
+//! LeakyReLU (optionally with a gain) as one fused element-wise pass forward and one backward,
+//! differentiable to any order.
 //!
-//! `f(x) = x` for x > 0, `a·x` otherwise, with PyTorch's derivative `f'(x) = 1` for x > 0 and
-//! `a` otherwise (so `a` at exactly 0). The estimator uses slope 0.01 (paper §4
-//! "Implementation"; the reference's `nn.LeakyReLU()`), the StyleGAN2 networks 0.2 (DESIGN §4).
+//! `f(x) = g·x` for x > 0, `g·a·x` otherwise, with PyTorch's derivative `f'(x) = g` for x > 0
+//! and `g·a` otherwise (so `g·a` at exactly 0). The estimator uses slope 0.01, gain 1 (paper
+//! §4 "Implementation"; the reference's `nn.LeakyReLU()`); the StyleGAN2 networks slope 0.2,
+//! gain √2 (DESIGN §4, `bias_act`'s `lrelu`).
 //!
 //! candle 0.11 element-wise ops allocate per call, and a composite LeakyReLU costs 2–5 ops
 //! forward and ≈ 12 backward (`maximum`'s backward builds two masks, divides and accumulates;
 //! DESIGN §6). On the CPU this module runs one pass each way through candle custom ops; other
-//! devices use the equivalent `max(x, a·x)` composite.
+//! devices use the equivalent `g·max(x, a·x)` composite.
+//!
+//! The backward is itself a custom op with a backward, so gradients through it can be
+//! differentiated again (R1 through D, path length through G; DESIGN §4): the input gradient
+//! `dx = dy ⊙ f'(x)` is linear in `dy` with the same factor, and `f'` is piecewise constant,
+//! so its derivative w.r.t. x is zero wherever it exists.
 
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Result, Shape, Tensor, bail};
@@ -17,16 +24,27 @@ use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Result, Shape, Tenso
 /// # Shapes
 /// Any shape, f32 or f64 on the CPU (any float dtype elsewhere); same shape out.
 pub fn leaky_relu(x: &Tensor, slope: f64) -> Result<Tensor> {
+    leaky_relu_gain(x, slope, 1.0)
+}
+
+/// `gain · LeakyReLU(x, slope)`, slope ∈ [0, 1], gain finite.
+///
+/// # Shapes
+/// Any shape, f32 or f64 on the CPU (any float dtype elsewhere); same shape out.
+pub fn leaky_relu_gain(x: &Tensor, slope: f64, gain: f64) -> Result<Tensor> {
     if !(0.0..=1.0).contains(&slope) {
         bail!("leaky_relu: slope {slope} is outside [0, 1]");
+    }
+    if !gain.is_finite() {
+        bail!("leaky_relu: gain {gain} is not finite");
     }
     let fused = x.device().is_cpu()
         && matches!(x.dtype(), candle_core::DType::F32 | candle_core::DType::F64);
     if fused {
-        x.contiguous()?.apply_op1(LeakyRelu { slope })
+        x.contiguous()?.apply_op1(LeakyRelu { slope, gain })
     } else {
         // max(x, a·x) equals LeakyReLU for 0 ≤ a ≤ 1 (ties at 0 split the gradient).
-        x.maximum(&x.affine(slope, 0.0)?)
+        x.maximum(&x.affine(slope, 0.0)?)?.affine(gain, 0.0)
     }
 }
 
@@ -40,6 +58,7 @@ fn slice<'a, T>(v: &'a [T], layout: &Layout, op: &str) -> Result<&'a [T]> {
 
 struct LeakyRelu {
     slope: f64,
+    gain: f64,
 }
 
 impl CustomOp1 for LeakyRelu {
@@ -50,14 +69,22 @@ impl CustomOp1 for LeakyRelu {
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
         let out = match s {
             CpuStorage::F32(v) => {
-                let a = self.slope as f32;
+                let (p, n) = (self.gain as f32, (self.gain * self.slope) as f32);
                 let v = slice(v, l, self.name())?;
-                CpuStorage::F32(v.iter().map(|&x| if x > 0.0 { x } else { a * x }).collect())
+                CpuStorage::F32(
+                    v.iter()
+                        .map(|&x| if x > 0.0 { p * x } else { n * x })
+                        .collect(),
+                )
             }
             CpuStorage::F64(v) => {
-                let a = self.slope;
+                let (p, n) = (self.gain, self.gain * self.slope);
                 let v = slice(v, l, self.name())?;
-                CpuStorage::F64(v.iter().map(|&x| if x > 0.0 { x } else { a * x }).collect())
+                CpuStorage::F64(
+                    v.iter()
+                        .map(|&x| if x > 0.0 { p * x } else { n * x })
+                        .collect(),
+                )
             }
             other => bail!("leaky-relu: unsupported dtype {:?}", other.dtype()),
         };
@@ -65,16 +92,25 @@ impl CustomOp1 for LeakyRelu {
     }
 
     fn bwd(&self, x: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
-        let g = grad
-            .contiguous()?
-            .apply_op2_no_bwd(&x.contiguous()?, &LeakyReluGrad { slope: self.slope })?;
-        Ok(Some(g))
+        let op = LeakyReluGrad {
+            slope: self.slope,
+            gain: self.gain,
+        };
+        Ok(Some(op.apply(grad, x)?))
     }
 }
 
-/// `grad · f'(x)`: (grad, x) → grad where x > 0, `slope · grad` elsewhere.
+/// `grad · f'(x)`: (grad, x) → `g·grad` where x > 0, `g·slope·grad` elsewhere.
+#[derive(Clone, Copy)]
 struct LeakyReluGrad {
     slope: f64,
+    gain: f64,
+}
+
+impl LeakyReluGrad {
+    fn apply(self, grad: &Tensor, x: &Tensor) -> Result<Tensor> {
+        grad.contiguous()?.apply_op2(&x.contiguous()?, self)
+    }
 }
 
 impl CustomOp2 for LeakyReluGrad {
@@ -98,22 +134,22 @@ impl CustomOp2 for LeakyReluGrad {
         }
         let out = match (g, x) {
             (CpuStorage::F32(g), CpuStorage::F32(x)) => {
-                let a = self.slope as f32;
+                let (p, n) = (self.gain as f32, (self.gain * self.slope) as f32);
                 let (g, x) = (slice(g, lg, self.name())?, slice(x, lx, self.name())?);
                 CpuStorage::F32(
                     g.iter()
                         .zip(x)
-                        .map(|(&g, &x)| if x > 0.0 { g } else { a * g })
+                        .map(|(&g, &x)| if x > 0.0 { p * g } else { n * g })
                         .collect(),
                 )
             }
             (CpuStorage::F64(g), CpuStorage::F64(x)) => {
-                let a = self.slope;
+                let (p, n) = (self.gain, self.gain * self.slope);
                 let (g, x) = (slice(g, lg, self.name())?, slice(x, lx, self.name())?);
                 CpuStorage::F64(
                     g.iter()
                         .zip(x)
-                        .map(|(&g, &x)| if x > 0.0 { g } else { a * g })
+                        .map(|(&g, &x)| if x > 0.0 { p * g } else { n * g })
                         .collect(),
                 )
             }
@@ -124,6 +160,18 @@ impl CustomOp2 for LeakyReluGrad {
             ),
         };
         Ok((out, lg.shape().clone()))
+    }
+
+    /// Linear in `grad` with the same factor; `f'` is piecewise constant, so no gradient
+    /// flows to `x` (zero wherever the derivative exists).
+    fn bwd(
+        &self,
+        _grad: &Tensor,
+        x: &Tensor,
+        _res: &Tensor,
+        outer: &Tensor,
+    ) -> Result<(Option<Tensor>, Option<Tensor>)> {
+        Ok((Some(self.apply(outer, x)?), None))
     }
 }
 
@@ -200,5 +248,52 @@ mod tests {
         let x = Tensor::zeros(4, DType::F32, &Device::Cpu).expect("tensor");
         assert!(leaky_relu(&x, 1.5).is_err());
         assert!(leaky_relu(&x, -0.1).is_err());
+    }
+
+    #[test]
+    fn leaky_relu_gain_matches_the_stylegan2_composite() -> Result<()> {
+        // g·(1 − a)·relu(x) + g·a·x (StyleGAN2's lrelu as candle ops). Values agree to f64
+        // rounding; gradients are g or g·a exactly, away from x = 0 where candle's relu
+        // derivative differs by convention (pseudo-random inputs are never exactly 0).
+        let (a, gain) = (0.2, std::f64::consts::SQRT_2);
+        let x = Var::from_tensor(&pseudo_random((2, 3, 5, 7), 4, DType::F64, &Device::Cpu)?)?;
+        let g = pseudo_random((2, 3, 5, 7), 5, DType::F64, &Device::Cpu)?;
+        let fused = leaky_relu_gain(x.as_tensor(), a, gain)?;
+        let t = x.as_tensor();
+        let composite = (t.relu()?.affine(gain * (1.0 - a), 0.0)? + t.affine(gain * a, 0.0)?)?;
+        assert!(max_abs_diff(&fused, &composite)? < 1e-15);
+        let gf = (fused * &g)?.sum_all()?.backward()?;
+        let gc = (composite * &g)?.sum_all()?.backward()?;
+        let (gf, gc) = (gf.get(t).expect("gradient"), gc.get(t).expect("gradient"));
+        assert!(max_abs_diff(gf, gc)? < 1e-15);
+        Ok(())
+    }
+
+    #[test]
+    fn leaky_relu_gradient_op_is_linear_in_the_gradient() -> Result<()> {
+        // Its backward w.r.t. the incoming gradient must be the same mask (second order).
+        let a = 0.2;
+        let x = pseudo_random((3, 4), 6, DType::F64, &Device::Cpu)?;
+        let dy = Var::from_tensor(&pseudo_random((3, 4), 7, DType::F64, &Device::Cpu)?)?;
+        let outer = pseudo_random((3, 4), 8, DType::F64, &Device::Cpu)?;
+        let op = LeakyReluGrad {
+            slope: a,
+            gain: 2.0,
+        };
+        let dx = op.apply(dy.as_tensor(), &x)?;
+        let store = (dx * &outer)?.sum_all()?.backward()?;
+        let got = store.get(dy.as_tensor()).expect("gradient");
+        let mask = x.gt(0.0)?.where_cond(
+            &Tensor::full(2.0, (3, 4), &Device::Cpu)?,
+            &Tensor::full(2.0 * a, (3, 4), &Device::Cpu)?,
+        )?;
+        assert_eq!(max_abs_diff(got, &(outer * mask)?)?, 0.0);
+        Ok(())
+    }
+
+    #[test]
+    fn leaky_relu_rejects_a_non_finite_gain() {
+        let x = Tensor::zeros(4, DType::F32, &Device::Cpu).expect("tensor");
+        assert!(leaky_relu_gain(&x, 0.2, f64::NAN).is_err());
     }
 }

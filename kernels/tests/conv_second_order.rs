@@ -1,7 +1,8 @@
-//! Second-order gradients through [`photomat_kernels::conv2d`]: the R1 penalty of a small
+//! Second-order gradients through [`photomat_kernels::conv2d`] and
+//! [`photomat_kernels::leaky_relu_gain`]: the R1 penalty of a small
 //! discriminator-like network (DESIGN §4: lazy R1 = ‖∂D(x)/∂x‖², differentiated w.r.t. the
-//! weights) equals the same computation through candle's own `conv2d` and f64 central
-//! differences.
+//! weights) equals the same computation through candle's own `conv2d` and composite
+//! LeakyReLU, and f64 central differences.
 //!
 //! candle keeps the graph of a backward pass only when `CANDLE_GRAD_DO_NOT_DETACH` is set
 //! before the thread's first `backward()` (DESIGN §6); this file holds a single test, which
@@ -9,29 +10,54 @@
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use photomat_kernels::testing::{max_abs_diff, pseudo_random};
-use photomat_kernels::{Conv2dSpec, conv2d, conv2d_reference};
+use photomat_kernels::{Conv2dSpec, conv2d, conv2d_reference, leaky_relu_gain};
 
-type ConvFn = fn(&Tensor, &Tensor, Conv2dSpec) -> Result<Tensor>;
+/// Which implementation D is built from: photomat-kernels' ops, or candle's own.
+#[derive(Clone, Copy)]
+enum Ops {
+    Ours,
+    Candle,
+}
 
-/// D(x) = Σ v ⊙ conv₂(tanh(conv₁(x))): a 3×3 circular conv, a smooth nonlinearity (so the
-/// second derivative is not zero) and a 4×4 stride-2 zero-padded conv, as in D's blocks.
+impl Ops {
+    fn conv(self, x: &Tensor, w: &Tensor, spec: Conv2dSpec) -> Result<Tensor> {
+        match self {
+            Ops::Ours => conv2d(x, w, spec),
+            Ops::Candle => conv2d_reference(x, w, spec),
+        }
+    }
+
+    /// StyleGAN2's `lrelu` (slope 0.2, gain √2); candle's form is the composite
+    /// `g·(1 − a)·relu(x) + g·a·x`.
+    fn lrelu(self, x: &Tensor) -> Result<Tensor> {
+        let (a, g) = (0.2, std::f64::consts::SQRT_2);
+        match self {
+            Ops::Ours => leaky_relu_gain(x, a, g),
+            Ops::Candle => x.relu()?.affine(g * (1.0 - a), 0.0)? + x.affine(g * a, 0.0)?,
+        }
+    }
+}
+
+/// D(x) = Σ v ⊙ conv₂(lrelu(tanh(conv₁(x)))): a 3×3 circular conv, a smooth nonlinearity
+/// (so the second derivative is not zero), D's activation and a 4×4 stride-2 zero-padded
+/// conv, as in D's blocks.
 /// (Even sizes: candle 0.11.1's own conv2d backward fails with a shape mismatch when a
 /// stride-2 conv leaves the last input row unread, so the reference needs them.)
-fn discriminator(conv: ConvFn, x: &Tensor, w1: &Tensor, w2: &Tensor, v: &Tensor) -> Result<Tensor> {
-    let h = conv(x, w1, Conv2dSpec::circular(1, 1))?.tanh()?;
-    (conv(&h, w2, Conv2dSpec::zeros(2, 1))? * v)?.sum_all()
+fn discriminator(ops: Ops, x: &Tensor, w1: &Tensor, w2: &Tensor, v: &Tensor) -> Result<Tensor> {
+    let h = ops.lrelu(&ops.conv(x, w1, Conv2dSpec::circular(1, 1))?.tanh()?)?;
+    (ops.conv(&h, w2, Conv2dSpec::zeros(2, 1))? * v)?.sum_all()
 }
 
 /// R1 = ‖∂D/∂x‖² and its gradients w.r.t. (w1, w2).
 fn r1_and_grads(
-    conv: ConvFn,
+    ops: Ops,
     x0: &Tensor,
     w1: &Var,
     w2: &Var,
     v: &Tensor,
 ) -> Result<(f64, Tensor, Tensor)> {
     let x = Var::from_tensor(x0)?;
-    let d = discriminator(conv, x.as_tensor(), w1.as_tensor(), w2.as_tensor(), v)?;
+    let d = discriminator(ops, x.as_tensor(), w1.as_tensor(), w2.as_tensor(), v)?;
     let dx = d.backward()?.remove(x.as_tensor()).expect("D depends on x");
     let r1 = dx.sqr()?.sum_all()?;
     let grads = r1.backward()?;
@@ -55,8 +81,8 @@ fn conv_r1_gradient_matches_candle_and_finite_differences() -> Result<()> {
     let w2 = Var::from_tensor(&(pseudo_random((2, 4, 4, 4), 3, DType::F64, &dev)? * 0.5)?)?;
     let v = pseudo_random((2, 2, 4, 3), 4, DType::F64, &dev)?;
 
-    let (r, g1, g2) = r1_and_grads(conv2d, &x, &w1, &w2, &v)?;
-    let (r_ref, g1_ref, g2_ref) = r1_and_grads(conv2d_reference, &x, &w1, &w2, &v)?;
+    let (r, g1, g2) = r1_and_grads(Ops::Ours, &x, &w1, &w2, &v)?;
+    let (r_ref, g1_ref, g2_ref) = r1_and_grads(Ops::Candle, &x, &w1, &w2, &v)?;
     // f64, two nested sums of ≤ 4·16·56 terms of O(1): rounding ≲ 1e-12 relative.
     assert!(
         (r - r_ref).abs() < 1e-10 * r_ref.abs().max(1.0),
@@ -91,7 +117,7 @@ fn conv_r1_gradient_matches_candle_and_finite_differences() -> Result<()> {
                 } else {
                     (&shifted, &w2)
                 };
-                Ok(r1_and_grads(conv2d, &x, a, b, &v)?.0)
+                Ok(r1_and_grads(Ops::Ours, &x, a, b, &v)?.0)
             };
             let fd = (r1_at(delta)? - r1_at(-delta)?) / (2.0 * delta);
             let tol = 1e-6 * analytic[i].abs().max(1.0);
