@@ -12,7 +12,7 @@
 //! A library must not pick the process allocator, so this is an opt-in for binaries: enable
 //! the `mimalloc` feature of `photomat-kernels` and add
 //!
-//! ```ignore
+//! ```text
 //! #[global_allocator]
 //! static GLOBAL: photomat_kernels::alloc::FastAllocator = photomat_kernels::alloc::FastAllocator;
 //! ```
