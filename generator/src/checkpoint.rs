@@ -46,7 +46,8 @@ pub fn save_checkpoint(vars: &VarMap, path: impl AsRef<Path>) -> Result<()> {
 }
 
 /// Loads a checkpoint into the variables of `vars`, which must describe the same
-/// architecture: same names, same shapes. Nothing is modified when the check fails.
+/// architecture: same names, same shapes. Nothing is modified when the check fails. Stored
+/// values are converted to each variable's dtype (an f64 checkpoint loads into an f32 model).
 pub fn load_checkpoint(vars: &VarMap, path: impl AsRef<Path>) -> Result<()> {
     let path = path.as_ref();
     // SAFETY: the file is mapped read-only for the duration of this call; a checkpoint
