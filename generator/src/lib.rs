@@ -17,7 +17,8 @@
 //! Every weight is an equalised-learning-rate parameter ([`equalized`]). Parameters live in a
 //! candle [`VarMap`](candle_nn::VarMap) under the `vb.pp(..)` prefixes documented per module;
 //! [`checkpoint`] saves and loads them as safetensors, rejecting checkpoints of another
-//! architecture with the mismatching tensor named.
+//! architecture with the mismatching tensor named; [`seeded_var_builder`] ([`init`]) makes
+//! initialisation reproducible.
 //!
 //! Only candle ops whose first *and* second derivatives are exact in candle 0.11 are used
 //! (DESIGN §6): no `upsample_nearest2d`, pooling, `scatter_add` or fused norms; FIR filtering is
@@ -64,6 +65,7 @@ pub mod checkpoint;
 pub mod discriminator;
 pub mod equalized;
 pub mod fir;
+pub mod init;
 pub mod mapping;
 pub mod modulated_conv;
 pub mod noise;
@@ -75,6 +77,7 @@ pub use checkpoint::{
     is_buffer, load_checkpoint, parameter_count, save_checkpoint, trainable_vars,
 };
 pub use discriminator::Discriminator;
+pub use init::seeded_var_builder;
 pub use mapping::{Mapping, mix_styles};
 pub use noise::NoiseInput;
 pub use relight::Relight;

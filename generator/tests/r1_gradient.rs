@@ -6,10 +6,8 @@
 
 use anyhow::Result;
 use candle_core::{DType, Device, Tensor, Var};
-use candle_nn::{VarBuilder, VarMap};
-use photomat_generator::{Discriminator, GeneratorConfig, seeded_uniform};
-
-mod common;
+use candle_nn::VarMap;
+use photomat_generator::{Discriminator, GeneratorConfig, seeded_uniform, seeded_var_builder};
 
 /// (parameter name, flat index) pairs probed, spread over every kind of layer: fromrgb, the
 /// residual convs, the skip, the epilogue conv and both fully connected layers.
@@ -41,8 +39,8 @@ fn setup() -> Result<Setup> {
         ..Default::default()
     };
     let vars = VarMap::new();
-    let d = Discriminator::new(&cfg, VarBuilder::from_varmap(&vars, DType::F64, &dev))?;
-    common::reseed(&vars, 7, |_| 1.0)?; // D: λ = 1 everywhere
+    // Seeded weights: the probes' derivatives (checked below) are reproducible.
+    let d = Discriminator::new(&cfg, seeded_var_builder(&vars, 1, DType::F64, &dev))?;
     // B = 5: two minibatch-stddev groups of sizes 3 and 2 are part of the graph.
     let image = seeded_uniform((5, 3, 32, 32), 1, DType::F64, &dev)?;
     let omega = seeded_uniform((5, 3, 32, 32), 2, DType::F64, &dev)?;
@@ -80,8 +78,8 @@ fn analytic(s: &Setup) -> Result<Vec<f64>> {
 /// ∂(Σ R1)/∂θ at the probes, by central differences (the penalty itself needs only the first
 /// backward pass, which is exact either way). R1 is smooth in θ away from LeakyReLU kinks;
 /// with δ = 1e-7 no pre-activation crosses 0 (else a probe would disagree by O(1)), so the
-/// error is O(δ²·f''') + rounding ε·|Σ R1|/δ ≈ 1e-16·1e-4/1e-7 = 1e-13 (Σ R1 = 9.7e-5 at
-/// this seeded initialisation, measured).
+/// error is O(δ²·f''') + the rounding of Σ R1 (a sum of ~10⁴ f64 terms, ≈ 1.7e-3 at this
+/// seeded initialisation: ~1e-17 … 1e-16 absolute) divided by δ, i.e. ≲ 1e-10.
 fn finite_differences(s: &Setup) -> Result<Vec<f64>> {
     let delta = 1e-7;
     let mut out = Vec::new();
@@ -130,15 +128,16 @@ fn r1_gradient_matches_finite_differences_with_do_not_detach() -> Result<()> {
     })
     .join()
     .expect("thread")?;
-    // Measured: derivatives 6e-8 … 5e-5, agreeing to ≤ 2e-6 relative (≤ 5e-12 absolute). Tolerance 1e-5
-    // relative plus 1e-12 absolute (the finite-difference rounding floor above).
+    // Measured (seed 1): derivatives 2.5e-6 … 8.7e-4, differences ≤ 4e-11 absolute and
+    // ≤ 5e-6 relative. Tolerance: 1e-4 relative plus the 1e-10 rounding floor above; every
+    // probe is ≥ 1e-6, 10⁴ times that floor, so a wrong or missing term cannot hide in it.
     for ((name, i), (a, f)) in PROBES.iter().zip(analytic.iter().zip(&fd)) {
         assert!(
-            f.abs() > 1e-8,
+            f.abs() > 1e-6,
             "{name}[{i}]: the penalty depends on it ({f})"
         );
         assert!(
-            (a - f).abs() <= 1e-5 * f.abs() + 1e-12,
+            (a - f).abs() <= 1e-4 * f.abs() + 1e-10,
             "{name}[{i}]: backprop {a} vs finite differences {f}"
         );
     }
