@@ -5,8 +5,9 @@
 //! without padding. Here the parameters live in candle-nn's [`Conv2d`] (`padding = 0`); the
 //! convolution is [`photomat_kernels::conv2d`] with circular padding, which reads the wrapped
 //! texels inside its im2col instead of building a padded copy (the same values as
-//! [`crate::circular_pad()`] followed by an unpadded conv; 4–5× faster than candle's `conv2d`
-//! forward and backward on the CPU, `docs/benchmarks.md`).
+//! [`crate::circular_pad()`] followed by an unpadded conv). Forward + backward of E's layers
+//! got 2.0–5.0× faster than with candle's `conv2d` and the polyphase backward
+//! (`docs/benchmarks.md`, "Estimator layers").
 //!
 //! Each layer keeps the size up to its stride ("same" convolution on the torus): a `k × k`
 //! kernel with stride `s` is padded by `(k − s)/2` on every side, so (H, W) → (H/s, W/s).
