@@ -1,0 +1,96 @@
+//! StyleGAN2's `lrelu` (slope 0.2, gain √2) forward + backward: the fused
+//! [`photomat_kernels::leaky_relu_gain`] against the composite `g·(1 − a)·relu(x) + g·a·x` of
+//! candle ops (the form DESIGN §6 measured fastest among candle compositions), paired in one
+//! process.
+//!
+//! Run (docs/benchmarks.md, "Fused LeakyReLU", records the numbers):
+//!
+//! ```text
+//! cargo bench -p photomat-kernels --features mimalloc --bench activation
+//! ```
+//!
+//! One pass: `y = lrelu(x)` on a `Var`, `Σ y ⊙ g`, `backward()` to x. 7 rounds of 5 passes per
+//! variant, the order alternating; medians of the per-round medians and of the per-round
+//! ratios.
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use candle_core::{DType, Device, Result, Tensor, Var};
+use photomat_kernels::leaky_relu_gain;
+use photomat_kernels::testing::pseudo_random;
+
+#[cfg(feature = "mimalloc")]
+#[global_allocator]
+static GLOBAL: photomat_kernels::alloc::FastAllocator = photomat_kernels::alloc::FastAllocator;
+
+const SLOPE: f64 = 0.2;
+const GAIN: f64 = std::f64::consts::SQRT_2;
+
+fn pass(fused: bool, x: &Var, g: &Tensor) -> Result<()> {
+    let t = x.as_tensor();
+    let y = if fused {
+        leaky_relu_gain(t, SLOPE, GAIN)?
+    } else {
+        (t.relu()?.affine(GAIN * (1.0 - SLOPE), 0.0)? + t.affine(GAIN * SLOPE, 0.0)?)?
+    };
+    let grads = (y * g)?.sum_all()?.backward()?;
+    black_box(grads.get(t));
+    Ok(())
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn main() -> Result<()> {
+    println!(
+        "threads: {}; allocator: {}",
+        photomat_kernels::alloc::thread_count(),
+        if cfg!(feature = "mimalloc") {
+            "mimalloc"
+        } else {
+            "system"
+        }
+    );
+    println!("| x shape | composite (ms) | fused (ms) | composite ÷ fused |");
+    println!("|---------|---------------:|-----------:|------------------:|");
+    // G's activations at 128² (128 channels) and 256² (64 channels), batch 4; M's hidden
+    // layer for one 256² image (64 features per texel).
+    for shape in [(4, 128, 128, 128), (4, 64, 256, 256), (1, 64, 256, 256)] {
+        let x = Var::from_tensor(&pseudo_random(shape, 1, DType::F32, &Device::Cpu)?)?;
+        let g = pseudo_random(shape, 2, DType::F32, &Device::Cpu)?;
+        pass(true, &x, &g)?;
+        pass(false, &x, &g)?;
+        let (mut comp, mut fused, mut ratio) = (Vec::new(), Vec::new(), Vec::new());
+        for round in 0..7 {
+            let time = |use_fused: bool| -> Result<f64> {
+                let mut t = Vec::new();
+                for _ in 0..5 {
+                    let start = Instant::now();
+                    pass(use_fused, &x, &g)?;
+                    t.push(start.elapsed().as_secs_f64() * 1e3);
+                }
+                Ok(median(t))
+            };
+            let (c, f) = if round % 2 == 0 {
+                let c = time(false)?;
+                (c, time(true)?)
+            } else {
+                let f = time(true)?;
+                (time(false)?, f)
+            };
+            comp.push(c);
+            fused.push(f);
+            ratio.push(c / f);
+        }
+        println!(
+            "| {shape:?} | {:.1} | {:.1} | {:.2}× |",
+            median(comp),
+            median(fused),
+            median(ratio)
+        );
+    }
+    Ok(())
+}
