@@ -76,6 +76,140 @@ pub fn leaky_relu_gain(x: &Tensor, slope: f64, gain: f64) -> Result<Tensor> {
     }
 }
 
+/// `gain · LeakyReLU(x + bias, slope)` with `bias` added along dimension 1 (channels):
+/// StyleGAN2's `bias_act` with `lrelu`, one pass forward and one backward (plus the bias
+/// gradient's sum). slope ∈ [0, 1], gain > 0 (the backward reads the sign of the input from
+/// the output, which needs a positive gain).
+///
+/// # Shapes
+/// x (B, C, …) of rank ≥ 2, bias (C) → x's shape.
+pub fn bias_leaky_relu_gain(x: &Tensor, bias: &Tensor, slope: f64, gain: f64) -> Result<Tensor> {
+    if !(0.0..=1.0).contains(&slope) {
+        bail!("bias_leaky_relu: slope {slope} is outside [0, 1]");
+    }
+    if !(gain.is_finite() && gain > 0.0) {
+        bail!("bias_leaky_relu: gain {gain} is not a positive number");
+    }
+    let c = x.dim(1)?;
+    if bias.dims() != [c] {
+        bail!(
+            "bias_leaky_relu: bias {:?} does not match {c} channels",
+            bias.dims()
+        );
+    }
+    let fused = x.device().is_cpu()
+        && bias.device().is_cpu()
+        && x.dtype() == bias.dtype()
+        && matches!(x.dtype(), candle_core::DType::F32 | candle_core::DType::F64);
+    if fused {
+        x.contiguous()?
+            .apply_op2(&bias.contiguous()?, BiasLeakyRelu { slope, gain })
+    } else {
+        let mut shape = vec![1; x.rank()];
+        shape[1] = c;
+        leaky_relu_gain(&x.broadcast_add(&bias.reshape(shape)?)?, slope, gain)
+    }
+}
+
+/// (x, bias) → `gain · LeakyReLU(x + bias)`, bias along dimension 1.
+struct BiasLeakyRelu {
+    slope: f64,
+    gain: f64,
+}
+
+impl BiasLeakyRelu {
+    /// `out[i] = f(x[i] + bias[channel of i])` over rows of `inner` elements, row r in
+    /// channel `r % channels`.
+    fn run<T: candle_core::WithDType>(&self, x: &[T], bias: &[T], inner: usize) -> Vec<T> {
+        let (p, n) = (T::from_f64(self.gain), T::from_f64(self.gain * self.slope));
+        let zero = T::from_f64(0.0);
+        let channels = bias.len();
+        let mut out = vec![zero; x.len()];
+        let row = |(r, (o, x)): (usize, (&mut [T], &[T]))| {
+            let b = bias[r % channels];
+            for (o, &x) in o.iter_mut().zip(x) {
+                let z = x + b;
+                *o = if z > zero { p * z } else { n * z };
+            }
+        };
+        if x.len() <= CHUNK {
+            out.chunks_mut(inner)
+                .zip(x.chunks(inner))
+                .enumerate()
+                .for_each(row);
+        } else {
+            out.par_chunks_mut(inner)
+                .zip(x.par_chunks(inner))
+                .enumerate()
+                .for_each(row);
+        }
+        out
+    }
+}
+
+impl CustomOp2 for BiasLeakyRelu {
+    fn name(&self) -> &'static str {
+        "bias-leaky-relu"
+    }
+
+    fn cpu_fwd(
+        &self,
+        x: &CpuStorage,
+        lx: &Layout,
+        b: &CpuStorage,
+        lb: &Layout,
+    ) -> Result<(CpuStorage, Shape)> {
+        let dims = lx.shape().dims();
+        if dims.len() < 2 || lb.shape().dims() != [dims[1]] {
+            bail!(
+                "bias-leaky-relu: bias {:?} does not fit x {dims:?}",
+                lb.shape()
+            );
+        }
+        let inner: usize = dims[2..].iter().product();
+        let out = match (x, b) {
+            (CpuStorage::F32(x), CpuStorage::F32(b)) => {
+                let (x, b) = (slice(x, lx, self.name())?, slice(b, lb, self.name())?);
+                CpuStorage::F32(self.run(x, b, inner.max(1)))
+            }
+            (CpuStorage::F64(x), CpuStorage::F64(b)) => {
+                let (x, b) = (slice(x, lx, self.name())?, slice(b, lb, self.name())?);
+                CpuStorage::F64(self.run(x, b, inner.max(1)))
+            }
+            (x, b) => bail!(
+                "bias-leaky-relu: unsupported dtypes {:?}, {:?}",
+                x.dtype(),
+                b.dtype()
+            ),
+        };
+        Ok((out, lx.shape().clone()))
+    }
+
+    /// `dz = grad ⊙ f'(z)` with the sign of z read from the output (gain > 0), then
+    /// `dx = dz` and `dbias = Σ dz` over every dimension but 1. Built from ops with their own
+    /// backward, so it can be differentiated again.
+    fn bwd(
+        &self,
+        _x: &Tensor,
+        _bias: &Tensor,
+        y: &Tensor,
+        grad: &Tensor,
+    ) -> Result<(Option<Tensor>, Option<Tensor>)> {
+        let op = LeakyReluGrad {
+            slope: self.slope,
+            gain: self.gain,
+        };
+        // The mask is constant (zero derivative): detached, so that a second backward does
+        // not wait for a gradient of y that no op provides.
+        let dz = op.apply(grad, &y.detach())?;
+        // Sum the contiguous trailing dimensions first (candle's fast last-dimension
+        // reduction), then the batch: (B, C, …) → (B, C) → (C).
+        let (b, c) = (dz.dim(0)?, dz.dim(1)?);
+        let dbias = dz.reshape((b, c, ()))?.sum(2)?.sum(0)?;
+        Ok((Some(dz), Some(dbias)))
+    }
+}
+
 /// The contiguous slice a layout describes, or an error naming the op.
 fn slice<'a, T>(v: &'a [T], layout: &Layout, op: &str) -> Result<&'a [T]> {
     match layout.contiguous_offsets() {
@@ -124,7 +258,8 @@ impl CustomOp1 for LeakyRelu {
             slope: self.slope,
             gain: self.gain,
         };
-        Ok(Some(op.apply(grad, x)?))
+        // The mask's input is a constant for the gradient (zero derivative a.e.).
+        Ok(Some(op.apply(grad, &x.detach())?))
     }
 }
 
@@ -340,6 +475,60 @@ mod tests {
         for ((d, g), x) in dx.iter().zip(g.to_vec1::<f32>()?).zip(&v) {
             assert_eq!(*d, if *x > 0.0 { p * g } else { q * g });
         }
+        Ok(())
+    }
+
+    #[test]
+    fn bias_leaky_relu_matches_add_then_activation() -> Result<()> {
+        // Against broadcast_add + leaky_relu_gain, values and gradients for x and the bias,
+        // NCHW and (N, C) rows (the per-texel MLP), including the rayon path (> CHUNK).
+        // f64; the bias gradient sums ≤ 2·40·40 products in another order: ≲ 1e-12.
+        let (a, gain) = (0.2, std::f64::consts::SQRT_2);
+        for (seed, shape) in [vec![2, 3, 4, 5], vec![7, 4], vec![2, 3, 120, 200]]
+            .into_iter()
+            .enumerate()
+        {
+            let seed = 3 * seed as u64;
+            let c = shape[1];
+            let x = Var::from_tensor(&pseudo_random(
+                shape.clone(),
+                seed,
+                DType::F64,
+                &Device::Cpu,
+            )?)?;
+            let b = Var::from_tensor(&pseudo_random(c, seed + 1, DType::F64, &Device::Cpu)?)?;
+            let g = pseudo_random(shape.clone(), seed + 2, DType::F64, &Device::Cpu)?;
+            let fused = bias_leaky_relu_gain(x.as_tensor(), b.as_tensor(), a, gain)?;
+            let mut bshape = vec![1; shape.len()];
+            bshape[1] = c;
+            let reference = leaky_relu_gain(
+                &x.as_tensor()
+                    .broadcast_add(&b.as_tensor().reshape(bshape)?)?,
+                a,
+                gain,
+            )?;
+            assert!(max_abs_diff(&fused, &reference)? < 1e-15, "{shape:?}");
+            let gf = (fused * &g)?.sum_all()?.backward()?;
+            let gr = (reference * &g)?.sum_all()?.backward()?;
+            for v in [x.as_tensor(), b.as_tensor()] {
+                let (p, q) = (gf.get(v).expect("gradient"), gr.get(v).expect("gradient"));
+                assert!(max_abs_diff(p, q)? < 1e-10, "{shape:?}");
+            }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn bias_leaky_relu_rejects_bad_arguments() -> Result<()> {
+        let x = Tensor::zeros((2, 3, 4), DType::F32, &Device::Cpu)?;
+        let b = Tensor::zeros(3, DType::F32, &Device::Cpu)?;
+        assert!(
+            bias_leaky_relu_gain(&x, &b, 0.2, 0.0).is_err(),
+            "gain must be > 0"
+        );
+        assert!(bias_leaky_relu_gain(&x, &b, 1.2, 1.0).is_err());
+        let wrong = Tensor::zeros(4, DType::F32, &Device::Cpu)?;
+        assert!(bias_leaky_relu_gain(&x, &wrong, 0.2, 1.0).is_err());
         Ok(())
     }
 }

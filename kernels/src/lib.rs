@@ -9,8 +9,8 @@
 //!   gradient and weight gradient each a custom op, differentiable to any order ([`conv`]).
 //! - [`conv2d_fast_backward`]: unpadded strided `conv2d` whose input gradient is a polyphase
 //!   `conv2d` instead of candle's slow direct-loop `conv_transpose2d` ([`conv_grad`]).
-//! - [`leaky_relu`], [`leaky_relu_gain`]: LeakyReLU (× gain) as one fused element-wise pass
-//!   each way, differentiable to any order ([`activation`]).
+//! - [`leaky_relu`], [`leaky_relu_gain`], [`bias_leaky_relu_gain`]: (bias +) LeakyReLU (× gain)
+//!   as one fused element-wise pass each way, differentiable to any order ([`activation`]).
 //! - [`alloc`]: the global allocator (mimalloc, opt-in feature) and thread count binaries use.
 //! - [`testing`]: seeded pseudo-random tensors and comparisons for tests and benchmarks.
 //!
@@ -23,6 +23,6 @@ pub mod conv;
 pub mod conv_grad;
 pub mod testing;
 
-pub use activation::{leaky_relu, leaky_relu_gain};
+pub use activation::{bias_leaky_relu_gain, leaky_relu, leaky_relu_gain};
 pub use conv::{Conv2dSpec, PaddingMode, conv2d, conv2d_reference};
 pub use conv_grad::conv2d_fast_backward;

@@ -1,5 +1,5 @@
 //! Second-order gradients through [`photomat_kernels::conv2d`] and
-//! [`photomat_kernels::leaky_relu_gain`]: the R1 penalty of a small
+//! [`photomat_kernels::bias_leaky_relu_gain`]: the R1 penalty of a small
 //! discriminator-like network (DESIGN §4: lazy R1 = ‖∂D(x)/∂x‖², differentiated w.r.t. the
 //! weights) equals the same computation through candle's own `conv2d` and composite
 //! LeakyReLU, and f64 central differences.
@@ -10,7 +10,7 @@
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use photomat_kernels::testing::{max_abs_diff, pseudo_random};
-use photomat_kernels::{Conv2dSpec, conv2d, conv2d_reference, leaky_relu_gain};
+use photomat_kernels::{Conv2dSpec, bias_leaky_relu_gain, conv2d, conv2d_reference};
 
 /// Which implementation D is built from: photomat-kernels' ops, or candle's own.
 #[derive(Clone, Copy)]
@@ -27,24 +27,30 @@ impl Ops {
         }
     }
 
-    /// StyleGAN2's `lrelu` (slope 0.2, gain √2); candle's form is the composite
-    /// `g·(1 − a)·relu(x) + g·a·x`.
-    fn lrelu(self, x: &Tensor) -> Result<Tensor> {
+    /// StyleGAN2's `bias_act` with `lrelu` (bias 0.1·c − 0.15 on channel c, slope 0.2, gain
+    /// √2); candle's form is `broadcast_add` then `g·(1 − a)·relu(z) + g·a·z`.
+    fn bias_lrelu(self, x: &Tensor) -> Result<Tensor> {
         let (a, g) = (0.2, std::f64::consts::SQRT_2);
+        let c = x.dim(1)?;
+        let bias: Vec<f64> = (0..c).map(|i| 0.1 * i as f64 - 0.15).collect();
+        let bias = Tensor::from_vec(bias, c, x.device())?;
         match self {
-            Ops::Ours => leaky_relu_gain(x, a, g),
-            Ops::Candle => x.relu()?.affine(g * (1.0 - a), 0.0)? + x.affine(g * a, 0.0)?,
+            Ops::Ours => bias_leaky_relu_gain(x, &bias, a, g),
+            Ops::Candle => {
+                let z = x.broadcast_add(&bias.reshape((1, c, 1, 1))?)?;
+                z.relu()?.affine(g * (1.0 - a), 0.0)? + z.affine(g * a, 0.0)?
+            }
         }
     }
 }
 
-/// D(x) = Σ v ⊙ conv₂(lrelu(tanh(conv₁(x)))): a 3×3 circular conv, a smooth nonlinearity
+/// D(x) = Σ v ⊙ conv₂(lrelu(tanh(conv₁(x)) + bias)): a 3×3 circular conv, a smooth nonlinearity
 /// (so the second derivative is not zero), D's activation and a 4×4 stride-2 zero-padded
 /// conv, as in D's blocks.
 /// (Even sizes: candle 0.11.1's own conv2d backward fails with a shape mismatch when a
 /// stride-2 conv leaves the last input row unread, so the reference needs them.)
 fn discriminator(ops: Ops, x: &Tensor, w1: &Tensor, w2: &Tensor, v: &Tensor) -> Result<Tensor> {
-    let h = ops.lrelu(&ops.conv(x, w1, Conv2dSpec::circular(1, 1))?.tanh()?)?;
+    let h = ops.bias_lrelu(&ops.conv(x, w1, Conv2dSpec::circular(1, 1))?.tanh()?)?;
     (ops.conv(&h, w2, Conv2dSpec::zeros(2, 1))? * v)?.sum_all()
 }
 
