@@ -73,8 +73,7 @@ fn demo_family_picks_the_model_and_unknown_families_are_listed() {
         ["photomat", "demo", "--out", out, "--family", "marble"],
         &mut Vec::new(),
     )
-    .err()
-    .expect("unknown family must fail")
+    .expect_err("unknown family must fail")
     .to_string();
     assert!(
         err.contains("'marble'") && err.contains("car_paint, fabric"),

@@ -207,8 +207,7 @@ fn renderer_rejects_bad_maps_with_clear_errors() {
     let light = [Highlight::CENTER];
     let expect = |maps: &MaterialMaps, lights: &[Highlight], needle: &str| {
         let err = render(brdf.as_ref(), maps, lights)
-            .err()
-            .expect("must fail")
+            .expect_err("must fail")
             .to_string();
         assert!(err.contains(needle), "expected '{needle}' in: {err}");
     };
