@@ -43,7 +43,6 @@
 //! # Ok(()) }
 //! ```
 
-pub mod circular_pad;
 pub mod conv;
 pub mod unet;
 pub mod upsample;
@@ -54,9 +53,9 @@ pub use photomat_kernels::activation;
 pub use photomat_kernels::conv_grad;
 
 pub use activation::leaky_relu;
-pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use conv::{CircularConv2d, circular_conv2d};
 pub use conv_grad::conv2d_fast_backward;
+pub use photomat_kernels::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use unet::{Estimator, EstimatorConfig};
 pub use upsample::{periodic_upsample_matrix, upsample2x_periodic};
 

@@ -7,22 +7,10 @@ use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap};
 use photomat_brdfs as _; // link the built-in plugins into the registry
 use photomat_estimator::{Estimator, EstimatorConfig};
 
-/// Values uniform in [−1, 1) from a SplitMix64 stream (candle's CPU generator cannot be
-/// seeded), so inputs are identical on every run.
+/// Values uniform in [−1, 1), f32 on the CPU, from the workspace's seeded generator (candle's
+/// CPU generator cannot be seeded), so inputs are identical on every run.
 fn pseudo_random(shape: impl Into<Shape>, seed: u64) -> Result<Tensor> {
-    let shape = shape.into();
-    let mut state = seed;
-    let values: Vec<f32> = (0..shape.elem_count())
-        .map(|_| {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            ((z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) as f32
-        })
-        .collect();
-    Tensor::from_vec(values, shape, &Device::Cpu)
+    photomat_kernels::testing::pseudo_random(shape, seed, DType::F32, &Device::Cpu)
 }
 
 fn max_abs(t: &Tensor) -> Result<f32> {

@@ -230,19 +230,9 @@ pub fn seeded_uniform(
     dtype: candle_core::DType,
     device: &candle_core::Device,
 ) -> Result<candle_core::Tensor> {
-    let shape = shape.into();
-    let mut state = seed;
-    let values: Vec<f64> = (0..shape.elem_count())
-        .map(|_| {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            ((z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0) * 3f64.sqrt()
-        })
-        .collect();
-    candle_core::Tensor::from_vec(values, shape, device)?.to_dtype(dtype)
+    photomat_kernels::testing::pseudo_random(shape, seed, candle_core::DType::F64, device)?
+        .affine(3f64.sqrt(), 0.0)?
+        .to_dtype(dtype)
 }
 
 #[cfg(test)]

@@ -3,12 +3,12 @@
 //! The tileable generator follows TileGen (Zhou et al. 2022), which PhotoMat uses for its
 //! tileable F (paper §4 "Implementation"): every convolution pads its input by wrapping around
 //! (PyTorch `padding_mode='circular'`), so each feature map is one period of an infinite
-//! periodic image and the network commutes with rolls. This is the same operation as
-//! `photomat_estimator::circular_pad2d` (kept local so the generator does not depend on the
-//! estimator crate), built from `narrow` + `cat`, whose first and second derivatives are exact
-//! in candle 0.11 (DESIGN §6). Zero padding uses candle's `pad_with_zeros` (also exact).
+//! periodic image and the network commutes with rolls. Circular padding is the shared
+//! `photomat_kernels::circular_pad_dim` (the estimator uses the same), built from `narrow` +
+//! `cat`, whose first and second derivatives are exact in candle 0.11 (DESIGN §6). Zero padding
+//! uses candle's `pad_with_zeros` (also exact).
 
-use candle_core::{Result, Tensor, bail};
+use candle_core::{Result, Tensor};
 
 /// How a layer extends its input beyond the border.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -46,24 +46,7 @@ pub fn pad_dim(
     }
     match mode {
         Padding::Zeros => x.pad_with_zeros(dim, before, after),
-        Padding::Circular => {
-            let size = x.dim(dim)?;
-            if before > size || after > size {
-                bail!(
-                    "circular padding ({before}, {after}) exceeds the size {size} of dim {dim}: \
-                     pads may be at most one period"
-                );
-            }
-            let mut parts = Vec::with_capacity(3);
-            if before > 0 {
-                parts.push(x.narrow(dim, size - before, before)?);
-            }
-            parts.push(x.clone());
-            if after > 0 {
-                parts.push(x.narrow(dim, 0, after)?);
-            }
-            Tensor::cat(&parts, dim)
-        }
+        Padding::Circular => photomat_kernels::circular_pad_dim(x, dim, before, after),
     }
 }
 

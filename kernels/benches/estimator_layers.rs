@@ -27,26 +27,16 @@ use photomat_kernels::{Conv2dSpec, conv2d, conv2d_fast_backward};
 #[global_allocator]
 static GLOBAL: photomat_kernels::alloc::FastAllocator = photomat_kernels::alloc::FastAllocator;
 
-/// Wrap-around padding of H and W by `p` with `narrow` + `cat` (the estimator's
-/// `circular_pad`).
-fn circular_pad(x: &Tensor, p: usize) -> Result<Tensor> {
-    let wrap = |t: &Tensor, dim: usize| -> Result<Tensor> {
-        let n = t.dim(dim)?;
-        Tensor::cat(&[&t.narrow(dim, n - p, p)?, t, &t.narrow(dim, 0, p)?], dim)
-    };
-    if p == 0 {
-        Ok(x.clone())
-    } else {
-        wrap(&wrap(x, 2)?, 3)
-    }
-}
-
 fn pass(new: bool, x: &Var, w: &Var, g: &Tensor, k: usize, s: usize) -> Result<()> {
     let p = (k - s) / 2;
     let y = if new {
         conv2d(x.as_tensor(), w.as_tensor(), Conv2dSpec::circular(s, p))?
     } else {
-        conv2d_fast_backward(&circular_pad(x.as_tensor(), p)?, w.as_tensor(), s)?
+        conv2d_fast_backward(
+            &photomat_kernels::circular_pad(x.as_tensor(), p)?,
+            w.as_tensor(),
+            s,
+        )?
     };
     let grads = (y * g)?.sum_all()?.backward()?;
     black_box((grads.get(x.as_tensor()), grads.get(w.as_tensor())));
