@@ -25,7 +25,7 @@ mod cellular;
 mod common;
 mod fabric;
 mod leather;
-mod noise;
+pub(crate) mod noise;
 mod paint;
 mod stone;
 mod tiles;

@@ -10,17 +10,12 @@
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-/// SplitMix64 finaliser (Steele et al. 2014): a bijective, well-mixed 64-bit hash.
-fn splitmix64(mut z: u64) -> u64 {
-    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
+// The SplitMix64 finaliser (a bijective, well-mixed 64-bit hash) shared with the noise.
+use crate::procedural::noise::mix64;
 
 /// The generator of photo `index` in a run seeded with `seed`.
 pub fn photo_rng(seed: u64, index: u64) -> StdRng {
-    StdRng::seed_from_u64(splitmix64(splitmix64(seed) ^ index))
+    StdRng::seed_from_u64(mix64(mix64(seed) ^ index))
 }
 
 /// A standard normal sample (Box–Muller; one of the pair is discarded, which keeps the draw
