@@ -22,9 +22,11 @@ pub mod alloc;
 pub mod circular_pad;
 pub mod conv;
 pub mod conv_grad;
+pub mod splitmix;
 pub mod testing;
 
 pub use activation::{bias_leaky_relu_gain, leaky_relu, leaky_relu_gain};
 pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use conv::{Conv2dSpec, PaddingMode, conv2d, conv2d_reference};
 pub use conv_grad::conv2d_fast_backward;
+pub use splitmix::SplitMix64;

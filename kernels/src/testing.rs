@@ -7,6 +7,8 @@
 
 use candle_core::{DType, Device, Result, Shape, Tensor};
 
+use crate::SplitMix64;
+
 /// Values uniform in [−1, 1) from a SplitMix64 stream seeded by `seed`, converted to `dtype`.
 ///
 /// # Shapes
@@ -18,16 +20,9 @@ pub fn pseudo_random(
     device: &Device,
 ) -> Result<Tensor> {
     let shape = shape.into();
-    let mut state = seed;
+    let mut rng = SplitMix64(seed);
     let values: Vec<f64> = (0..shape.elem_count())
-        .map(|_| {
-            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = state;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            z ^= z >> 31;
-            (z >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
-        })
+        .map(|_| rng.next_unit() * 2.0 - 1.0)
         .collect();
     Tensor::from_vec(values, shape, device)?.to_dtype(dtype)
 }
