@@ -51,18 +51,11 @@ fn initial_values(shape: &Shape, name: &str, init: Init, seed: u64) -> Result<Ve
         Init::Uniform { lo, up } => (0..n)
             .map(|_| lo + (up - lo) * (1.0 - rng.next_open01()))
             .collect(),
-        Init::Randn { mean, stdev } => {
-            let mut v = Vec::with_capacity(n + 1);
-            while v.len() < n {
-                let (u1, u2) = (rng.next_open01(), rng.next_open01());
-                let r = (-2.0 * u1.ln()).sqrt();
-                let t = std::f64::consts::TAU * u2;
-                v.push(mean + stdev * r * t.cos());
-                v.push(mean + stdev * r * t.sin());
-            }
-            v.truncate(n);
-            v
-        }
+        Init::Randn { mean, stdev } => rng
+            .normals(n)
+            .into_iter()
+            .map(|v| mean + stdev * v)
+            .collect(),
         Init::Kaiming { .. } => {
             bail!(
                 "seeded init: Kaiming initialisation of `{name}` is not supported (no photomat-generator layer uses it)"

@@ -67,6 +67,7 @@ pub mod equalized;
 pub mod fir;
 pub mod init;
 pub mod mapping;
+pub mod model_files;
 pub mod modulated_conv;
 pub mod noise;
 pub mod padding;
@@ -79,6 +80,7 @@ pub use checkpoint::{
 pub use discriminator::Discriminator;
 pub use init::seeded_var_builder;
 pub use mapping::{Mapping, mix_styles};
+pub use model_files::{GanManifest, GanModel};
 pub use noise::NoiseInput;
 pub use relight::Relight;
 pub use synthesis::{Generator, Synthesis};
@@ -97,7 +99,8 @@ pub const MAX_CHANNELS: usize = 512;
 
 /// Architecture of G, M and D. The defaults are the reference configuration of DESIGN §4 at
 /// 256² (channel multiplier 1); CPU users shrink `channel_multiplier` and `resolution`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct GeneratorConfig {
     /// Side of F, of M's images and of D's input: a power of two in 32 … 1024. Default 256.
     pub resolution: usize,

@@ -25,6 +25,21 @@ impl SplitMix64 {
     pub fn next_open01(&mut self) -> f64 {
         ((self.next_u64() >> 11) + 1) as f64 / (1u64 << 53) as f64
     }
+
+    /// `n` samples of N(0, 1) by the Box–Muller transform (pairs of draws; the last pair's
+    /// second value is dropped when `n` is odd).
+    pub fn normals(&mut self, n: usize) -> Vec<f64> {
+        let mut v = Vec::with_capacity(n + 1);
+        while v.len() < n {
+            let (u1, u2) = (self.next_open01(), self.next_open01());
+            let r = (-2.0 * u1.ln()).sqrt();
+            let t = std::f64::consts::TAU * u2;
+            v.push(r * t.cos());
+            v.push(r * t.sin());
+        }
+        v.truncate(n);
+        v
+    }
 }
 
 #[cfg(test)]

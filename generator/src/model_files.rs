@@ -1,0 +1,323 @@
+//! A trained relightable generator on disk: the inference half of a `photomat train-gan` run,
+//! everything later stages need (the estimator's training, `photomat relight`, `photomat
+//! sample`) and nothing of the optimiser.
+//!
+//! A GAN model folder holds two files, each written atomically (temporary file + rename, so
+//! an interrupted save leaves the previous version intact):
+//! - [`GAN_MANIFEST_FILE`] (`gan.json`): format tag, version, the architecture
+//!   ([`GeneratorConfig`]) and free-form provenance written by whoever saved it (training
+//!   step, kimg, data set, seed);
+//! - [`GAN_WEIGHTS_FILE`] (`gan.safetensors`): G — the EMA copy when it comes from training —
+//!   under the prefix `g.` (including the tracked `g.mapping.w_avg`) and M under `m.`.
+//!
+//! Loading checks the manifest's tag and version and then the weights against the
+//! architecture ([`crate::load_checkpoint`]): a folder of another architecture fails with the
+//! mismatching tensor named.
+
+use std::path::{Path, PathBuf};
+
+use candle_core::{DType, Device, Result, Tensor, bail};
+use candle_nn::{VarBuilder, VarMap};
+use photomat_core::image_io::write_atomic;
+use serde::{Deserialize, Serialize};
+
+use crate::{Generator, GeneratorConfig, NoiseInput, Relight, load_checkpoint, seeded_var_builder};
+
+/// Manifest file of a GAN model folder.
+pub const GAN_MANIFEST_FILE: &str = "gan.json";
+/// Weights file of a GAN model folder.
+pub const GAN_WEIGHTS_FILE: &str = "gan.safetensors";
+/// `format` tag of the manifest.
+pub const GAN_FORMAT_TAG: &str = "photomat-gan";
+/// Manifest version this build reads and writes.
+pub const GAN_FORMAT_VERSION: u32 = 1;
+/// Prefix of G's parameters in the weights file.
+pub const G_PREFIX: &str = "g";
+/// Prefix of M's parameters in the weights file.
+pub const M_PREFIX: &str = "m";
+
+/// Contents of `gan.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GanManifest {
+    /// Always [`GAN_FORMAT_TAG`].
+    pub format: String,
+    /// [`GAN_FORMAT_VERSION`] when written by this build.
+    pub version: u32,
+    /// Architecture of G and M.
+    pub architecture: GeneratorConfig,
+    /// Where the weights come from (free-form JSON; `null` for untrained models).
+    #[serde(default)]
+    pub provenance: serde_json::Value,
+}
+
+/// G and M with their parameters: a neural-material generator ready for inference.
+#[derive(Clone)]
+pub struct GanModel {
+    config: GeneratorConfig,
+    vars: VarMap,
+    generator: Generator,
+    relight: Relight,
+    device: Device,
+}
+
+impl std::fmt::Debug for GanModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GanModel")
+            .field("config", &self.config)
+            .field("device", &self.device)
+            .finish_non_exhaustive()
+    }
+}
+
+impl GanModel {
+    /// An untrained model of `config` whose parameters are drawn from `seed`
+    /// ([`seeded_var_builder`]), in f32 on `device`.
+    pub fn new(config: &GeneratorConfig, seed: u64, device: &Device) -> Result<Self> {
+        config.validate()?;
+        let vars = VarMap::new();
+        let vb = seeded_var_builder(&vars, seed, DType::F32, device);
+        Self::from_var_builder(config, vars, vb, device)
+    }
+
+    /// The model over existing variables: `vars` must hold (or will receive) G under `g.` and
+    /// M under `m.`. Used by the trainer to wrap its EMA copy of G and its M.
+    pub fn from_vars(config: &GeneratorConfig, vars: VarMap, device: &Device) -> Result<Self> {
+        config.validate()?;
+        let vb = VarBuilder::from_varmap(&vars, DType::F32, device);
+        Self::from_var_builder(config, vars, vb, device)
+    }
+
+    fn from_var_builder(
+        config: &GeneratorConfig,
+        vars: VarMap,
+        vb: VarBuilder,
+        device: &Device,
+    ) -> Result<Self> {
+        let generator = Generator::new(config, vb.pp(G_PREFIX))?;
+        let relight = Relight::new(config, vb.pp(M_PREFIX))?;
+        Ok(Self {
+            config: config.clone(),
+            vars,
+            generator,
+            relight,
+            device: device.clone(),
+        })
+    }
+
+    /// Loads a GAN model folder (see the module docs) onto `device`.
+    pub fn load(dir: &Path, device: &Device) -> Result<Self> {
+        let manifest = read_gan_manifest(dir)?;
+        let model = Self::new(&manifest.architecture, 0, device)?;
+        load_checkpoint(&model.vars, dir.join(GAN_WEIGHTS_FILE))?;
+        Ok(model)
+    }
+
+    /// Writes the model folder `dir` (created if missing) with `provenance` in its manifest.
+    /// Weights first, manifest last: a folder whose manifest exists is complete.
+    pub fn save(&self, dir: &Path, provenance: serde_json::Value) -> Result<()> {
+        std::fs::create_dir_all(dir).map_err(|e| {
+            candle_core::Error::msg(format!("cannot create {}: {e}", dir.display()))
+        })?;
+        let tmp = dir.join(format!(".{GAN_WEIGHTS_FILE}.{}.tmp", std::process::id()));
+        self.vars.save(&tmp)?;
+        let target = dir.join(GAN_WEIGHTS_FILE);
+        std::fs::rename(&tmp, &target).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            candle_core::Error::msg(format!("cannot write {}: {e}", target.display()))
+        })?;
+        let manifest = GanManifest {
+            format: GAN_FORMAT_TAG.into(),
+            version: GAN_FORMAT_VERSION,
+            architecture: self.config.clone(),
+            provenance,
+        };
+        let json = serde_json::to_vec_pretty(&manifest).map_err(candle_core::Error::wrap)?;
+        write_atomic(&dir.join(GAN_MANIFEST_FILE), &json).map_err(candle_core::Error::wrap)
+    }
+
+    /// The architecture.
+    pub fn config(&self) -> &GeneratorConfig {
+        &self.config
+    }
+
+    /// The parameters (G under `g.`, M under `m.`).
+    pub fn vars(&self) -> &VarMap {
+        &self.vars
+    }
+
+    /// G.
+    pub fn generator(&self) -> &Generator {
+        &self.generator
+    }
+
+    /// M.
+    pub fn relight(&self) -> &Relight {
+        &self.relight
+    }
+
+    /// The device the parameters live on.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The latent codes of `seeds`, one row each: z ~ N(0, I) drawn from a SplitMix64 stream
+    /// per seed, so that a seed names the same material on every machine.
+    ///
+    /// # Shapes
+    /// → (seeds.len(), latent_dim), f32.
+    pub fn latents(&self, seeds: &[u64]) -> Result<Tensor> {
+        let d = self.config.latent_dim;
+        let values: Vec<f32> = seeds
+            .iter()
+            .flat_map(|&s| photomat_kernels::SplitMix64(s).normals(d))
+            .map(|v| v as f32)
+            .collect();
+        Tensor::from_vec(values, (seeds.len(), d), &self.device)
+    }
+
+    /// Noise images for every synthesis layer, drawn per seed like [`GanModel::latents`]
+    /// (from a stream distinct from z's), in the order [`NoiseInput::Given`] expects.
+    ///
+    /// # Shapes
+    /// → one (seeds.len(), 1, r, r) tensor per noise layer.
+    pub fn noise_images(&self, seeds: &[u64]) -> Result<Vec<Tensor>> {
+        let shapes = self.generator.synthesis().noise_shapes(seeds.len());
+        let mut streams: Vec<_> = seeds
+            .iter()
+            .map(|&s| photomat_kernels::SplitMix64(s ^ NOISE_STREAM_KEY))
+            .collect();
+        shapes
+            .iter()
+            .map(|&(b, c, h, w)| {
+                let values: Vec<f32> = streams
+                    .iter_mut()
+                    .flat_map(|rng| rng.normals(c * h * w))
+                    .map(|v| v as f32)
+                    .collect();
+                Tensor::from_vec(values, (b, c, h, w), &self.device)
+            })
+            .collect()
+    }
+
+    /// The neural materials of `seeds` with truncation ψ (1 = none) and the seeds' own noise:
+    /// deterministic per seed.
+    ///
+    /// # Shapes
+    /// → (seeds.len(), feature_channels, R, R).
+    pub fn features_for_seeds(&self, seeds: &[u64], psi: f64) -> Result<Tensor> {
+        let z = self.latents(seeds)?;
+        let noise = self.noise_images(seeds)?;
+        self.generator.forward(&z, psi, &NoiseInput::Given(&noise))
+    }
+}
+
+/// Key mixed into a seed for its noise images, so that z and the noise are different streams.
+const NOISE_STREAM_KEY: u64 = 0x6E6F_6973_655F_696D; // "noise_im"
+
+/// Reads and checks `dir/gan.json`; errors name the file and the problem.
+pub fn read_gan_manifest(dir: &Path) -> Result<GanManifest> {
+    let path: PathBuf = dir.join(GAN_MANIFEST_FILE);
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        candle_core::Error::msg(format!(
+            "{}: cannot read the GAN manifest ({e}); is {} a `photomat train-gan` output folder?",
+            path.display(),
+            dir.display()
+        ))
+    })?;
+    let manifest: GanManifest = serde_json::from_str(&text).map_err(|e| {
+        candle_core::Error::msg(format!("{}: not a GAN manifest: {e}", path.display()))
+    })?;
+    if manifest.format != GAN_FORMAT_TAG {
+        bail!(
+            "{}: format is `{}`, expected `{GAN_FORMAT_TAG}`",
+            path.display(),
+            manifest.format
+        );
+    }
+    if manifest.version != GAN_FORMAT_VERSION {
+        bail!(
+            "{}: format version {} is not supported by this build (reads version {GAN_FORMAT_VERSION})",
+            path.display(),
+            manifest.version
+        );
+    }
+    manifest.architecture.validate().map_err(|e| {
+        candle_core::Error::msg(format!("{}: invalid architecture: {e}", path.display()))
+    })?;
+    Ok(manifest)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tiny() -> GeneratorConfig {
+        GeneratorConfig {
+            resolution: 32,
+            channel_multiplier: 1.0 / 64.0,
+            latent_dim: 16,
+            feature_channels: 8,
+            relight_hidden: 8,
+            ..Default::default()
+        }
+    }
+
+    #[test]
+    fn save_load_round_trip_gives_identical_features() -> anyhow::Result<()> {
+        let dir = tempfile::tempdir()?;
+        let model = GanModel::new(&tiny(), 7, &Device::Cpu)?;
+        model.save(dir.path(), serde_json::json!({"step": 3}))?;
+        let loaded = GanModel::load(dir.path(), &Device::Cpu)?;
+        assert_eq!(loaded.config(), model.config());
+        let a = model.features_for_seeds(&[1, 2], 1.0)?;
+        let b = loaded.features_for_seeds(&[1, 2], 1.0)?;
+        let diff = (a - b)?.abs()?.max_all()?.to_scalar::<f32>()?;
+        assert_eq!(diff, 0.0);
+        assert_eq!(read_gan_manifest(dir.path())?.provenance["step"], 3);
+        Ok(())
+    }
+
+    #[test]
+    fn seeds_name_materials() -> anyhow::Result<()> {
+        let model = GanModel::new(&tiny(), 7, &Device::Cpu)?;
+        let z = model.latents(&[5, 6, 5])?.to_vec2::<f32>()?;
+        assert_eq!(z[0], z[2]);
+        assert_ne!(z[0], z[1]);
+        let mean = z[1].iter().sum::<f32>() / z[1].len() as f32;
+        assert!(mean.abs() < 0.75, "z of seed 6 has mean {mean}");
+        Ok(())
+    }
+
+    #[test]
+    fn loading_another_architecture_names_the_mismatch() -> anyhow::Result<()> {
+        let dir = tempfile::tempdir()?;
+        GanModel::new(&tiny(), 7, &Device::Cpu)?.save(dir.path(), serde_json::Value::Null)?;
+        // Swap the manifest for a wider architecture: the weights no longer fit.
+        let mut manifest = read_gan_manifest(dir.path())?;
+        manifest.architecture.channel_multiplier = 1.0 / 32.0;
+        std::fs::write(
+            dir.path().join(GAN_MANIFEST_FILE),
+            serde_json::to_vec(&manifest)?,
+        )?;
+        let err = GanModel::load(dir.path(), &Device::Cpu)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("does not match") && err.contains("g.synthesis"),
+            "{err}"
+        );
+        Ok(())
+    }
+
+    #[test]
+    fn a_folder_without_manifest_is_reported_by_path() {
+        let dir = tempfile::tempdir().unwrap();
+        let err = GanModel::load(dir.path(), &Device::Cpu)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("gan.json") && err.contains("train-gan"),
+            "{err}"
+        );
+    }
+}
