@@ -16,6 +16,7 @@
 
 pub mod adapter;
 pub mod brdf;
+pub mod checkpoint;
 pub mod error;
 pub mod flash;
 pub mod image_io;

@@ -44,6 +44,7 @@
 //! ```
 
 pub mod conv;
+pub mod model_files;
 pub mod unet;
 pub mod upsample;
 
@@ -55,6 +56,7 @@ pub use photomat_kernels::conv_grad;
 pub use activation::leaky_relu;
 pub use conv::{CircularConv2d, circular_conv2d};
 pub use conv_grad::conv2d_fast_backward;
+pub use model_files::{EstimatorManifest, EstimatorModel};
 pub use photomat_kernels::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use unet::{Estimator, EstimatorConfig};
 pub use upsample::{periodic_upsample_matrix, upsample2x_periodic};

@@ -70,7 +70,8 @@ const MAX_LEVELS: usize = 16;
 
 /// Architecture of [`Estimator`]. The defaults are the paper's configuration for
 /// `height(ggx)` (n = 8).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct EstimatorConfig {
     /// Channels of the neural material F (the generator's 32 toRGB features). Default 32.
     pub in_channels: usize,

@@ -21,7 +21,10 @@ use candle_nn::{VarBuilder, VarMap};
 use photomat_core::image_io::write_atomic;
 use serde::{Deserialize, Serialize};
 
-use crate::{Generator, GeneratorConfig, NoiseInput, Relight, load_checkpoint, seeded_var_builder};
+use crate::{
+    Generator, GeneratorConfig, NoiseInput, Relight, load_checkpoint, save_checkpoint,
+    seeded_var_builder,
+};
 
 /// Manifest file of a GAN model folder.
 pub const GAN_MANIFEST_FILE: &str = "gan.json";
@@ -118,13 +121,7 @@ impl GanModel {
         std::fs::create_dir_all(dir).map_err(|e| {
             candle_core::Error::msg(format!("cannot create {}: {e}", dir.display()))
         })?;
-        let tmp = dir.join(format!(".{GAN_WEIGHTS_FILE}.{}.tmp", std::process::id()));
-        self.vars.save(&tmp)?;
-        let target = dir.join(GAN_WEIGHTS_FILE);
-        std::fs::rename(&tmp, &target).map_err(|e| {
-            let _ = std::fs::remove_file(&tmp);
-            candle_core::Error::msg(format!("cannot write {}: {e}", target.display()))
-        })?;
+        save_checkpoint(&self.vars, dir.join(GAN_WEIGHTS_FILE))?;
         let manifest = GanManifest {
             format: GAN_FORMAT_TAG.into(),
             version: GAN_FORMAT_VERSION,

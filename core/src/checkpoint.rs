@@ -1,0 +1,148 @@
+//! Safetensors checkpoints of a candle [`VarMap`] that refuse another architecture and never
+//! leave a half-written file: the one loader and saver of every network's weights (G, M, D,
+//! E, optimiser state).
+//!
+//! [`load_vars_checked`] loads only when every variable is present with the same shape and
+//! the file holds no other tensor; otherwise nothing is modified and the error names the file
+//! and the first mismatching tensors. [`save_vars_atomic`] writes a temporary file in the
+//! same folder and renames it over the target, so a Ctrl-C or a crash mid-save keeps the
+//! previous checkpoint intact.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use candle_core::safetensors::MmapedSafetensors;
+use candle_nn::VarMap;
+
+use crate::{Error, Result};
+
+/// Most mismatches listed in an error (the count of all of them is given too).
+const MAX_LISTED_MISMATCHES: usize = 5;
+
+/// Saves every variable of `vars` to the safetensors file `path` atomically.
+pub fn save_vars_atomic(vars: &VarMap, path: &Path) -> Result<()> {
+    static COUNTER: AtomicUsize = AtomicUsize::new(0);
+    let name = path
+        .file_name()
+        .ok_or_else(|| Error::file(path, "is not a file path"))?;
+    let tmp = path.with_file_name(format!(
+        ".{}.{}-{}.tmp",
+        name.to_string_lossy(),
+        std::process::id(),
+        COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = vars
+        .save(&tmp)
+        .map_err(|e| e.to_string())
+        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| e.to_string()));
+    result.map_err(|e| {
+        // Best effort: the temporary file is garbage whatever happened.
+        let _ = std::fs::remove_file(&tmp);
+        Error::file(path, format!("cannot write checkpoint: {e}"))
+    })
+}
+
+/// Loads the safetensors file `path` into the variables of `vars`, which must describe the
+/// same architecture: same names, same shapes. Stored values are converted to each
+/// variable's dtype (an f64 checkpoint loads into an f32 model).
+pub fn load_vars_checked(vars: &VarMap, path: &Path) -> Result<()> {
+    // SAFETY: the file is mapped read-only for the duration of this call; a checkpoint
+    // modified concurrently by another process is outside this API's contract (as for
+    // candle's own VarMap::load).
+    let file = unsafe { MmapedSafetensors::new(path) }
+        .map_err(|e| Error::file(path, format!("cannot read checkpoint: {e}")))?;
+    let stored: HashMap<String, Vec<usize>> = file
+        .tensors()
+        .into_iter()
+        .map(|(name, view)| (name, view.shape().to_vec()))
+        .collect();
+    let data = vars.data().lock().expect("VarMap lock poisoned");
+    let mut names: Vec<&String> = data.keys().collect();
+    names.sort();
+    let mut problems = Vec::new();
+    for name in &names {
+        let expected = data[*name].dims();
+        match stored.get(*name) {
+            None => problems.push(format!("tensor `{name}` {expected:?} is missing")),
+            Some(shape) if shape.as_slice() != expected => problems.push(format!(
+                "tensor `{name}` has shape {shape:?} in the checkpoint, the model expects {expected:?}"
+            )),
+            Some(_) => {}
+        }
+    }
+    let mut extra: Vec<_> = stored.keys().filter(|n| !data.contains_key(*n)).collect();
+    extra.sort();
+    for name in extra {
+        problems.push(format!("unexpected tensor `{name}` {:?}", stored[name]));
+    }
+    if !problems.is_empty() {
+        let n = problems.len();
+        problems.truncate(MAX_LISTED_MISMATCHES);
+        return Err(Error::file(
+            path,
+            format!(
+                "checkpoint does not match the model's architecture ({n} mismatches): {}{}",
+                problems.join("; "),
+                if n > MAX_LISTED_MISMATCHES {
+                    "; …"
+                } else {
+                    ""
+                }
+            ),
+        ));
+    }
+    for name in names {
+        let var = &data[name];
+        var.set(&file.load(name, var.device())?.to_dtype(var.dtype())?)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::{DType, Device};
+    use candle_nn::{Init, VarBuilder};
+
+    fn vars_with(shape: (usize, usize), value: f64) -> VarMap {
+        let vars = VarMap::new();
+        let vb = VarBuilder::from_varmap(&vars, DType::F32, &Device::Cpu);
+        vb.get_with_hints(shape, "layer.weight", Init::Const(value))
+            .unwrap();
+        vars
+    }
+
+    #[test]
+    fn round_trip_and_mismatch() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("w.safetensors");
+        save_vars_atomic(&vars_with((2, 3), 1.5), &path).unwrap();
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            1,
+            "temporary left"
+        );
+
+        let target = vars_with((2, 3), 0.0);
+        load_vars_checked(&target, &path).unwrap();
+        let v = target.data().lock().unwrap()["layer.weight"]
+            .as_tensor()
+            .clone();
+        assert_eq!(v.sum_all().unwrap().to_scalar::<f32>().unwrap(), 9.0);
+
+        let other = vars_with((3, 3), 0.0);
+        let err = load_vars_checked(&other, &path).unwrap_err().to_string();
+        assert!(
+            err.contains("w.safetensors") && err.contains("layer.weight"),
+            "{err}"
+        );
+        let untouched = other.data().lock().unwrap()["layer.weight"]
+            .as_tensor()
+            .clone();
+        assert_eq!(
+            untouched.sum_all().unwrap().to_scalar::<f32>().unwrap(),
+            0.0
+        );
+    }
+}
