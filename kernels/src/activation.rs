@@ -67,7 +67,8 @@ pub fn leaky_relu_gain(x: &Tensor, slope: f64, gain: f64) -> Result<Tensor> {
         bail!("leaky_relu: gain {gain} is not finite");
     }
     let fused = x.device().is_cpu()
-        && matches!(x.dtype(), candle_core::DType::F32 | candle_core::DType::F64);
+        && matches!(x.dtype(), candle_core::DType::F32 | candle_core::DType::F64)
+        && !crate::reference::reference_ops();
     if fused {
         x.contiguous()?.apply_op1(LeakyRelu { slope, gain })
     } else {
@@ -100,7 +101,8 @@ pub fn bias_leaky_relu_gain(x: &Tensor, bias: &Tensor, slope: f64, gain: f64) ->
     let fused = x.device().is_cpu()
         && bias.device().is_cpu()
         && x.dtype() == bias.dtype()
-        && matches!(x.dtype(), candle_core::DType::F32 | candle_core::DType::F64);
+        && matches!(x.dtype(), candle_core::DType::F32 | candle_core::DType::F64)
+        && !crate::reference::reference_ops();
     if fused {
         x.contiguous()?
             .apply_op2(&bias.contiguous()?, BiasLeakyRelu { slope, gain })

@@ -25,7 +25,8 @@
 //! `F: (Gx(g, W), Gw(x, g))`, `Gx(dy, W): (F(g, W), Gw(g, dy))`, `Gw(x, dy): (Gx(dy, g), F(x, g))`.
 //!
 //! CPU tensors of dtype f32 and f64 take this path; other devices and dtypes fall back to
-//! [`conv2d_reference`] (candle's `conv2d`, circular padding by `narrow` + `cat`).
+//! [`conv2d_reference`] (candle's `conv2d`, circular padding by `narrow` + `cat`), as does
+//! every call inside [`crate::reference::with_reference_ops`].
 
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp2, DType, Layout, Result, Shape, Tensor, WithDType, bail};
@@ -88,7 +89,7 @@ impl Conv2dSpec {
 /// Circular padding must not exceed the image (`padding ≤ min(H, W)`), as in PyTorch.
 pub fn conv2d(x: &Tensor, w: &Tensor, spec: Conv2dSpec) -> Result<Tensor> {
     let g = Geometry::new(x.dims4()?, w.dims4()?, spec)?;
-    if !fast_path(x, w)? {
+    if !fast_path(x, w)? || crate::reference::reference_ops() {
         return conv2d_reference(x, w, spec);
     }
     apply_forward(g, x, w)

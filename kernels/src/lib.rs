@@ -11,6 +11,10 @@
 //!   `conv2d` instead of candle's slow direct-loop `conv_transpose2d` ([`conv_grad`]).
 //! - [`leaky_relu`], [`leaky_relu_gain`], [`bias_leaky_relu_gain`]: (bias +) LeakyReLU (× gain)
 //!   as one fused element-wise pass each way, differentiable to any order ([`activation`]).
+//! - [`fir`]: separable FIR filtering/resampling, one sparse constant matrix per axis
+//!   (StyleGAN2's `upfirdn2d` with the `[1, 3, 3, 1]` filter), differentiable to any order.
+//! - [`reference`]: a per-thread switch sending every op to its candle reference composition
+//!   (equivalence tests, same-process baselines).
 //! - [`alloc`]: the global allocator (mimalloc, opt-in feature) and thread count binaries use.
 //! - [`testing`]: seeded pseudo-random tensors and comparisons for tests and benchmarks.
 //!
@@ -22,6 +26,8 @@ pub mod alloc;
 pub mod circular_pad;
 pub mod conv;
 pub mod conv_grad;
+pub mod fir;
+pub mod reference;
 pub mod splitmix;
 pub mod testing;
 
@@ -29,4 +35,6 @@ pub use activation::{bias_leaky_relu_gain, leaky_relu, leaky_relu_gain};
 pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use conv::{Conv2dSpec, PaddingMode, conv2d, conv2d_reference};
 pub use conv_grad::conv2d_fast_backward;
+pub use fir::{AxisMatrix, separable, separable_reference};
+pub use reference::{reference_ops, with_reference_ops};
 pub use splitmix::SplitMix64;
