@@ -30,6 +30,16 @@ impl Padding {
     }
 }
 
+impl From<Padding> for photomat_kernels::PaddingMode {
+    /// The same border rule for photomat-kernels' convolution.
+    fn from(p: Padding) -> Self {
+        match p {
+            Padding::Zeros => Self::Zeros,
+            Padding::Circular => Self::Circular,
+        }
+    }
+}
+
 /// Pads dimension `dim` with `before` elements in front and `after` behind.
 ///
 /// # Shapes
