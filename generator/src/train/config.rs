@@ -1,0 +1,212 @@
+//! The full configuration of a GAN training run ([`TrainConfig`], serialised as the run
+//! folder's `train.json`): the architecture ([`GeneratorConfig`]), the data set path and every
+//! hyper-parameter of StyleGAN2-ADA's training loop that PhotoMat uses (DESIGN §4), with the
+//! reference defaults.
+//!
+//! [`config_differences`] compares two configurations field by field (dotted JSON paths such
+//! as `generator.resolution`), so that resuming a run with a contradicting setting fails
+//! naming the field.
+
+use std::path::PathBuf;
+
+use candle_core::{Result, bail};
+use serde::{Deserialize, Serialize};
+
+use super::adam::AdamConfig;
+use crate::GeneratorConfig;
+
+/// StyleGAN2's R1 weight heuristic: γ = 0.0002 · R² / batch (StyleGAN2-ADA `train.py`, `auto`
+/// configuration, DESIGN §4).
+pub fn default_r1_gamma(resolution: usize, batch: usize) -> f64 {
+    0.0002 * (resolution * resolution) as f64 / batch as f64
+}
+
+/// Everything a training run depends on; `train.json` in the run folder.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    /// Architecture of G, M and D.
+    pub generator: GeneratorConfig,
+    /// The prepared data set folder (`photomat prepare` output).
+    pub data: PathBuf,
+    /// Images per step (for G's and D's phases alike). Default 4.
+    pub batch: usize,
+    /// Seed of the run: initial weights, latents, noise, crops, lights, rolls, style mixing.
+    pub seed: u64,
+    /// Base learning rate of G (and M) and D before the lazy-regularisation correction.
+    /// Default 0.0025 (the reference at 256²).
+    pub lr: f64,
+    /// Adam's β₁. Default 0 (StyleGAN2).
+    pub beta1: f64,
+    /// Adam's β₂. Default 0.99 (StyleGAN2).
+    pub beta2: f64,
+    /// Adam's ε. Default 1e-8 (StyleGAN2).
+    pub eps: f64,
+    /// R1 weight γ; default [`default_r1_gamma`].
+    pub r1_gamma: f64,
+    /// Steps between lazy R1 penalties on D. Default 16.
+    pub r1_interval: usize,
+    /// G's lazy-regularisation interval, used only for the Adam correction: the reference
+    /// (StyleGAN2-ADA) corrects G's lr and β with c = 4/5 whether or not path-length
+    /// regularisation runs; it is not implemented here. Default 4; 0 disables the correction.
+    pub g_reg_interval: usize,
+    /// Probability that a batch mixes two latents' styles. Default 0.9.
+    pub style_mixing_prob: f64,
+    /// EMA half-life of G_ema in thousands of images. Default 10 · batch / 32 (StyleGAN2-ADA
+    /// `auto`: 10 k images per batch of 32).
+    pub ema_kimg: f64,
+    /// EMA ramp-up: the half-life is at most `ema_rampup` × images seen so far (StyleGAN2-ADA
+    /// `auto`: 0.05); `None` disables it.
+    pub ema_rampup: Option<f64>,
+    /// Consecutive steps with a skipped (non-finite) update after which training stops.
+    /// Default 20.
+    pub nan_limit: usize,
+}
+
+impl TrainConfig {
+    /// The reference hyper-parameters for `generator`, `data`, `batch` and `seed`.
+    pub fn new(generator: GeneratorConfig, data: PathBuf, batch: usize, seed: u64) -> Self {
+        let adam = AdamConfig::default();
+        let r1_gamma = default_r1_gamma(generator.resolution, batch.max(1));
+        Self {
+            generator,
+            data,
+            batch,
+            seed,
+            lr: adam.lr,
+            beta1: adam.beta1,
+            beta2: adam.beta2,
+            eps: adam.eps,
+            r1_gamma,
+            r1_interval: 16,
+            g_reg_interval: 4,
+            style_mixing_prob: 0.9,
+            ema_kimg: 10.0 * batch as f64 / 32.0,
+            ema_rampup: Some(0.05),
+            nan_limit: 20,
+        }
+    }
+
+    /// Adam settings of G and M (lazy correction for `g_reg_interval`).
+    pub fn adam_g(&self) -> AdamConfig {
+        self.adam_base().lazy(self.g_reg_interval)
+    }
+
+    /// Adam settings of D (lazy correction for `r1_interval`).
+    pub fn adam_d(&self) -> AdamConfig {
+        self.adam_base().lazy(self.r1_interval)
+    }
+
+    fn adam_base(&self) -> AdamConfig {
+        AdamConfig {
+            lr: self.lr,
+            beta1: self.beta1,
+            beta2: self.beta2,
+            eps: self.eps,
+        }
+    }
+
+    /// Checks every field; errors name the field and its value.
+    pub fn validate(&self) -> Result<()> {
+        self.generator.validate()?;
+        if self.batch == 0 {
+            bail!("batch must be at least 1");
+        }
+        self.adam_base().validate()?;
+        if !(self.r1_gamma.is_finite() && self.r1_gamma >= 0.0) {
+            bail!("r1_gamma {} must be finite and ≥ 0", self.r1_gamma);
+        }
+        if self.r1_interval == 0 {
+            bail!("r1_interval must be at least 1");
+        }
+        if !(0.0..=1.0).contains(&self.style_mixing_prob) {
+            bail!(
+                "style_mixing_prob {} must be in [0, 1]",
+                self.style_mixing_prob
+            );
+        }
+        if !(self.ema_kimg.is_finite() && self.ema_kimg >= 0.0) {
+            bail!("ema_kimg {} must be finite and ≥ 0", self.ema_kimg);
+        }
+        if let Some(r) = self.ema_rampup
+            && !(r.is_finite() && r > 0.0)
+        {
+            bail!("ema_rampup {r} must be positive and finite");
+        }
+        if self.nan_limit == 0 {
+            bail!("nan_limit must be at least 1");
+        }
+        Ok(())
+    }
+}
+
+/// The fields in which `a` and `b` differ, as `path: a-value ≠ b-value` strings with dotted
+/// paths (`generator.channel_multiplier: 0.25 ≠ 0.125`), sorted by path.
+pub fn config_differences(a: &TrainConfig, b: &TrainConfig) -> Vec<String> {
+    let (Ok(va), Ok(vb)) = (serde_json::to_value(a), serde_json::to_value(b)) else {
+        return vec!["configuration cannot be serialised".into()];
+    };
+    let mut out = Vec::new();
+    diff_values("", &va, &vb, &mut out);
+    out.sort();
+    out
+}
+
+fn diff_values(path: &str, a: &serde_json::Value, b: &serde_json::Value, out: &mut Vec<String>) {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Object(ma), Value::Object(mb)) => {
+            let keys: std::collections::BTreeSet<&String> = ma.keys().chain(mb.keys()).collect();
+            for k in keys {
+                let p = if path.is_empty() {
+                    k.clone()
+                } else {
+                    format!("{path}.{k}")
+                };
+                diff_values(
+                    &p,
+                    ma.get(k).unwrap_or(&Value::Null),
+                    mb.get(k).unwrap_or(&Value::Null),
+                    out,
+                );
+            }
+        }
+        _ if a != b => out.push(format!("{path}: {a} ≠ {b}")),
+        _ => {}
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_follow_the_reference() {
+        let g = GeneratorConfig {
+            resolution: 64,
+            ..Default::default()
+        };
+        let c = TrainConfig::new(g, "data".into(), 4, 1);
+        c.validate().unwrap();
+        assert!((c.r1_gamma - 0.0002 * 4096.0 / 4.0).abs() < 1e-12);
+        assert!((c.ema_kimg - 1.25).abs() < 1e-12);
+        assert!((c.adam_d().lr - 0.0025 * 16.0 / 17.0).abs() < 1e-15);
+        assert!((c.adam_g().lr - 0.0025 * 0.8).abs() < 1e-15);
+    }
+
+    #[test]
+    fn differences_name_the_field() {
+        let a = TrainConfig::new(GeneratorConfig::default(), "d".into(), 4, 1);
+        let mut b = a.clone();
+        assert!(config_differences(&a, &b).is_empty());
+        b.generator.channel_multiplier = 0.5;
+        b.seed = 2;
+        let d = config_differences(&a, &b);
+        assert_eq!(d.len(), 2, "{d:?}");
+        assert!(
+            d[0].starts_with("generator.channel_multiplier: 1.0 ≠ 0.5"),
+            "{d:?}"
+        );
+        assert!(d[1].starts_with("seed: 1 ≠ 2"), "{d:?}");
+    }
+}

@@ -1,0 +1,96 @@
+//! The resumable state of a training run, in the run folder:
+//!
+//! - [`STATE_FILE`] (`train_state.safetensors`): every variable a step reads or writes — G and
+//!   M (`g.*`, `m.*`, including the `g.mapping.w_avg` buffer), G_ema (`g_ema.*`), D (`d.*`),
+//!   both optimisers' moments and step counts (`opt_g.*`, `opt_d.*`, [`super::adam`]) and the
+//!   trainer's counters (`trainer.counters` = [steps done, consecutive skipped steps]) — saved
+//!   atomically with [`photomat_core::checkpoint::save_vars_atomic`];
+//! - [`CONFIG_FILE`] (`train.json`): the full [`TrainConfig`].
+//!
+//! Every random draw of a step is a function of the run seed and the step
+//! ([`super::streams`]), so these two files are all a run needs to continue bit-identically.
+//! Loading refuses a state of another configuration naming the differing fields, and a state
+//! file of another architecture naming the mismatching tensor
+//! ([`photomat_core::checkpoint::load_vars_checked`]); nothing is modified when it fails.
+
+use std::path::{Path, PathBuf};
+
+use candle_core::{Result, Var};
+use candle_nn::VarMap;
+use photomat_core::image_io::write_atomic;
+
+use super::config::{TrainConfig, config_differences};
+
+/// The state file in a run folder.
+pub const STATE_FILE: &str = "train_state.safetensors";
+/// The configuration file in a run folder.
+pub const CONFIG_FILE: &str = "train.json";
+
+/// Inserts the variables of `source` whose names start with `from` into `target`, renamed
+/// with `to` in place of `from`; the `Var`s are shared, not copied.
+pub fn insert_renamed(target: &VarMap, source: &VarMap, from: &str, to: &str) {
+    let src = source.data().lock().expect("VarMap lock poisoned");
+    let mut dst = target.data().lock().expect("VarMap lock poisoned");
+    for (name, var) in src.iter().filter(|(n, _)| n.starts_with(from)) {
+        dst.insert(format!("{to}{}", &name[from.len()..]), var.clone());
+    }
+}
+
+/// Inserts one variable under `name`.
+pub fn insert_var(target: &VarMap, name: &str, var: &Var) {
+    target
+        .data()
+        .lock()
+        .expect("VarMap lock poisoned")
+        .insert(name.to_string(), var.clone());
+}
+
+/// Reads `dir/train.json`; errors name the file.
+pub fn read_config(dir: &Path) -> Result<TrainConfig> {
+    let path = dir.join(CONFIG_FILE);
+    let text = std::fs::read_to_string(&path).map_err(|e| {
+        candle_core::Error::msg(format!(
+            "{}: cannot read the training configuration ({e}); is {} a `photomat train-gan` run folder?",
+            path.display(),
+            dir.display()
+        ))
+    })?;
+    serde_json::from_str(&text).map_err(|e| {
+        candle_core::Error::msg(format!(
+            "{}: not a training configuration: {e}",
+            path.display()
+        ))
+    })
+}
+
+/// Writes `dir/train.json` atomically.
+pub fn write_config(dir: &Path, config: &TrainConfig) -> Result<()> {
+    let json = serde_json::to_vec_pretty(config).map_err(candle_core::Error::wrap)?;
+    write_atomic(&dir.join(CONFIG_FILE), &json).map_err(candle_core::Error::wrap)
+}
+
+/// Saves `state` and `config` into the run folder `dir` (created if missing): the state
+/// file first, then the configuration, each atomically.
+pub fn save_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| candle_core::Error::msg(format!("cannot create {}: {e}", dir.display())))?;
+    photomat_core::checkpoint::save_vars_atomic(state, &dir.join(STATE_FILE))
+        .map_err(candle_core::Error::wrap)?;
+    write_config(dir, config)
+}
+
+/// Loads the run folder `dir` into `state`, after checking that its configuration is
+/// `config`; errors name the file and the differing fields or tensors.
+pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()> {
+    let saved = read_config(dir)?;
+    let diffs = config_differences(&saved, config);
+    if !diffs.is_empty() {
+        candle_core::bail!(
+            "{}: the run was made with another configuration (saved ≠ requested): {}",
+            dir.join(CONFIG_FILE).display(),
+            diffs.join("; ")
+        );
+    }
+    let path: PathBuf = dir.join(STATE_FILE);
+    photomat_core::checkpoint::load_vars_checked(state, &path).map_err(candle_core::Error::wrap)
+}

@@ -1,0 +1,366 @@
+//! One GAN training step of PhotoMat (paper §3–4) in the order of StyleGAN2-ADA's training loop
+//! (`training_loop.py` phases Gmain, Dmain, Dreg; `loss.py` `StyleGAN2Loss`), DESIGN §4:
+//!
+//! 1. **G step** — latents z (with style mixing, probability 0.9, one cut-off per batch drawn
+//!    in 1 … num_ws − 1), seeded noise, G → F; in tileable mode F is rolled per sample
+//!    ([`super::roll`]); lights drawn like the real crops' ([`TrainingData`]) give ω; M(F, ω) →
+//!    image; loss `softplus(−D(image, ω))`; Adam on G and M. The tracked `w_avg` moves
+//!    towards the batch's mean w.
+//! 2. **D step** — fresh latents, noise and lights, fakes without G's graph; real crops with
+//!    their ω; loss `softplus(D(fake)) + softplus(−D(real))`; Adam on D.
+//! 3. **R1 step** every `r1_interval` steps — `mean ‖∇ₓD(x_real, ω)‖² · γ/2 · interval`; Adam
+//!    on D (a second D update that step, as in the reference).
+//! 4. **EMA** of G into G_ema ([`super::ema`]); M is shared by G and G_ema (the reference keeps
+//!    no EMA of M, whose lr multiplier is 0.01).
+//!
+//! Any phase whose loss or gradient is not finite is skipped ([`super::nan_guard`]).
+//!
+//! Every random draw comes from a seed of (run seed, step, purpose) ([`super::streams`]):
+//! latents via [`GanModel::latents`], noise via [`GanModel::noise_images`] (fed as
+//! [`NoiseInput::Given`]), crops and lights via [`TrainingData`], rolls and mixing via
+//! SplitMix64. With the same seed two runs produce identical weights on the CPU, and a run
+//! resumed from [`Trainer::save_state`] continues exactly as the uninterrupted one.
+//!
+//! The R1 penalty is a double backward, which candle computes only when the environment has
+//! `CANDLE_GRAD_DO_NOT_DETACH=1` before the thread's first `backward()` (DESIGN §6); see
+//! [`enable_second_order_gradients`]. Without it the first R1 step fails with an error naming
+//! the variable.
+
+use std::path::Path;
+
+use candle_core::{DType, Device, Result, Tensor, Var};
+use candle_nn::VarMap;
+use photomat_kernels::SplitMix64;
+
+use super::adam::Adam;
+use super::config::TrainConfig;
+use super::data::{TrainingData, omega_for};
+use super::ema::{Ema, ema_beta};
+use super::loss::{discriminator_loss, generator_loss, r1_loss};
+use super::nan_guard::{NanGuard, gradients_finite};
+use super::roll::{roll_offsets, roll_per_sample};
+use super::state::{insert_renamed, insert_var, load_state, save_state};
+use super::streams::{Stream, stream_seed, stream_seeds};
+use crate::model_files::G_PREFIX;
+use crate::{Discriminator, GanModel, NoiseInput, mix_styles, seeded_var_builder};
+
+/// Sets `CANDLE_GRAD_DO_NOT_DETACH=1` so that candle keeps the graph of gradients (needed by
+/// the R1 penalty's double backward). Call it at the start of the program, before any thread
+/// runs a `backward()` (candle reads it once per thread) and before other threads exist:
+/// changing the environment is only sound while no other thread reads it.
+pub fn enable_second_order_gradients() {
+    if std::env::var_os("CANDLE_GRAD_DO_NOT_DETACH").is_none() {
+        // SAFETY: documented precondition: called before other threads are started.
+        unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
+    }
+}
+
+/// What one step measured.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepStats {
+    /// Index of the step (0-based; steps done before it).
+    pub step: u64,
+    /// G's loss.
+    pub loss_g: f64,
+    /// D's logistic loss (without R1).
+    pub loss_d: f64,
+    /// Mean D logit on the real crops.
+    pub real_logit: f64,
+    /// Mean D logit on the fakes of D's step.
+    pub fake_logit: f64,
+    /// Mean R1 penalty ‖∇ₓD‖² on the reals, on R1 steps.
+    pub r1: Option<f64>,
+    /// Phases skipped because of non-finite values, e.g. `D loss is NaN`.
+    pub skipped: Vec<String>,
+}
+
+/// Which phase's random streams a generation uses.
+#[derive(Debug, Clone, Copy)]
+enum Phase {
+    G,
+    D,
+}
+
+impl Phase {
+    /// (latent, mixing latent, noise, mixing decision, roll, lights) streams.
+    fn streams(self) -> [Stream; 6] {
+        match self {
+            Phase::G => [
+                Stream::GLatent,
+                Stream::GMixLatent,
+                Stream::GNoise,
+                Stream::GMixing,
+                Stream::GRoll,
+                Stream::GLights,
+            ],
+            Phase::D => [
+                Stream::DLatent,
+                Stream::DMixLatent,
+                Stream::DNoise,
+                Stream::DMixing,
+                Stream::DRoll,
+                Stream::DLights,
+            ],
+        }
+    }
+}
+
+/// Generated images of a phase.
+struct Fakes {
+    /// (B, 3, R, R) encoded images.
+    images: Tensor,
+    /// (B, 3, R, R) their ω.
+    omega: Tensor,
+    /// (B, latent_dim) the unmixed w (for the `w_avg` update).
+    w: Tensor,
+}
+
+/// G, M, D, G_ema, their optimisers and the step counter of a training run.
+pub struct Trainer {
+    config: TrainConfig,
+    device: Device,
+    /// Training G (`g.*`) and M (`m.*`).
+    model: GanModel,
+    /// G_ema (`g.*`) and the shared M (`m.*`).
+    ema_model: GanModel,
+    ema: Ema,
+    d_vars: VarMap,
+    d: Discriminator,
+    opt_g: Adam,
+    opt_d: Adam,
+    guard: NanGuard,
+    step: u64,
+    counters: Var,
+    state: VarMap,
+}
+
+impl Trainer {
+    /// A fresh run: G, M and D initialised from the run seed ([`seeded_var_builder`]),
+    /// G_ema a copy of G, moments zero, step 0.
+    pub fn new(config: TrainConfig, device: &Device) -> Result<Self> {
+        config.validate()?;
+        let cfg = &config.generator;
+        let model = GanModel::new(cfg, config.seed, device)?;
+        // G_ema: a copy of G's variables; M's variables are shared.
+        let ema_vars = VarMap::new();
+        {
+            let src = model.vars().data().lock().expect("VarMap lock poisoned");
+            let mut dst = ema_vars.data().lock().expect("VarMap lock poisoned");
+            for (name, var) in src.iter() {
+                let v = if name.starts_with(&format!("{G_PREFIX}.")) {
+                    Var::from_tensor(&var.as_tensor().copy()?)?
+                } else {
+                    var.clone()
+                };
+                dst.insert(name.clone(), v);
+            }
+        }
+        let ema_model = GanModel::from_vars(cfg, ema_vars, device)?;
+        let ema = Ema::new(ema_model.vars(), model.vars(), &format!("{G_PREFIX}."))?;
+        let d_vars = VarMap::new();
+        let d = Discriminator::new(
+            cfg,
+            seeded_var_builder(&d_vars, config.seed, DType::F32, device),
+        )?;
+        let opt_g = Adam::for_varmap(model.vars(), "", config.adam_g())?;
+        let opt_d = Adam::for_varmap(&d_vars, "", config.adam_d())?;
+        let counters = Var::zeros(2, DType::F64, device)?;
+        let state = VarMap::new();
+        insert_renamed(&state, model.vars(), "", "");
+        insert_renamed(&state, ema_model.vars(), &format!("{G_PREFIX}."), "g_ema.");
+        insert_renamed(&state, &d_vars, "", "d.");
+        insert_renamed(&state, opt_g.state(), "", "opt_g.");
+        insert_renamed(&state, opt_d.state(), "", "opt_d.");
+        insert_var(&state, "trainer.counters", &counters);
+        Ok(Self {
+            guard: NanGuard::new(config.nan_limit),
+            config,
+            device: device.clone(),
+            model,
+            ema_model,
+            ema,
+            d_vars,
+            d,
+            opt_g,
+            opt_d,
+            step: 0,
+            counters,
+            state,
+        })
+    }
+
+    /// The run's configuration.
+    pub fn config(&self) -> &TrainConfig {
+        &self.config
+    }
+
+    /// Steps done (the index of the next step).
+    pub fn steps_done(&self) -> u64 {
+        self.step
+    }
+
+    /// Real images shown to D so far (steps × batch).
+    pub fn images_seen(&self) -> u64 {
+        self.step * self.config.batch as u64
+    }
+
+    /// The training G and M.
+    pub fn model(&self) -> &GanModel {
+        &self.model
+    }
+
+    /// G_ema with M: what the run folder's inference model holds.
+    pub fn ema_model(&self) -> &GanModel {
+        &self.ema_model
+    }
+
+    /// D.
+    pub fn discriminator(&self) -> &Discriminator {
+        &self.d
+    }
+
+    /// D's variables.
+    pub fn discriminator_vars(&self) -> &VarMap {
+        &self.d_vars
+    }
+
+    /// Everything [`Trainer::save_state`] writes, by name (module [`super::state`]).
+    pub fn state_vars(&self) -> &VarMap {
+        &self.state
+    }
+
+    /// Writes `train_state.safetensors` and `train.json` into the run folder `dir`.
+    pub fn save_state(&self, dir: &Path) -> Result<()> {
+        self.counters.set(&Tensor::new(
+            &[self.step as f64, self.guard.streak() as f64],
+            &self.device,
+        )?)?;
+        save_state(dir, &self.state, &self.config)
+    }
+
+    /// Restores a run folder written by [`Trainer::save_state`] for this configuration.
+    pub fn load_state(&mut self, dir: &Path) -> Result<()> {
+        load_state(dir, &self.state, &self.config)?;
+        let c = self.counters.as_tensor().to_vec1::<f64>()?;
+        self.step = c[0] as u64;
+        self.guard.set_streak(c[1] as usize);
+        Ok(())
+    }
+
+    /// Writes the inference model (G_ema + M, [`GanModel::save`]) into `dir`.
+    pub fn save_model(&self, dir: &Path, provenance: serde_json::Value) -> Result<()> {
+        self.ema_model.save(dir, provenance)
+    }
+
+    /// Fakes of `phase` at `step` from the training G and M.
+    fn generate(&self, phase: Phase, step: u64, data: &dyn TrainingData) -> Result<Fakes> {
+        let [latent, mix_latent, noise, mixing, roll, lights] = phase.streams();
+        let cfg = &self.config.generator;
+        let (seed, b) = (self.config.seed, self.config.batch);
+        let g = self.model.generator();
+        let z = self.model.latents(&stream_seeds(seed, step, latent, b))?;
+        let w = g.mapping().forward(&z)?;
+        let n = cfg.num_ws();
+        let mut ws = w
+            .unsqueeze(1)?
+            .broadcast_as((b, n, cfg.latent_dim))?
+            .contiguous()?;
+        let mut rng = SplitMix64(stream_seed(seed, step, mixing, 0));
+        if n > 1 && rng.next_unit() < self.config.style_mixing_prob {
+            let cutoff = 1 + ((rng.next_unit() * (n - 1) as f64) as usize).min(n - 2);
+            let z2 = self
+                .model
+                .latents(&stream_seeds(seed, step, mix_latent, b))?;
+            ws = mix_styles(&ws, &g.mapping().ws(&z2, 1.0, n)?, cutoff)?;
+        }
+        let noise_images = self
+            .model
+            .noise_images(&stream_seeds(seed, step, noise, b))?;
+        let mut features = g
+            .synthesis()
+            .forward(&ws, &NoiseInput::Given(&noise_images))?;
+        if cfg.tileable {
+            let offsets = roll_offsets(&stream_seeds(seed, step, roll, b), cfg.resolution);
+            features = roll_per_sample(&features, &offsets)?;
+        }
+        let highlights = data.fake_highlights(b, stream_seed(seed, step, lights, 0))?;
+        let omega = omega_for(&highlights, cfg.resolution, &self.device)?;
+        let images = self.model.relight().forward(&features, &omega)?;
+        Ok(Fakes { images, omega, w })
+    }
+
+    /// Runs one training step (module docs) on `data`. Errors: data or numerical failures,
+    /// and [`NanGuard`]'s stop after `nan_limit` consecutive skipped steps.
+    pub fn step(&mut self, data: &dyn TrainingData) -> Result<StepStats> {
+        let step = self.step;
+        let (seed, b) = (self.config.seed, self.config.batch);
+
+        // 1. G and M.
+        let fakes = self.generate(Phase::G, step, data)?;
+        let logits = self.d.forward(&fakes.images, &fakes.omega)?;
+        let loss = generator_loss(&logits)?;
+        let loss_g = scalar(&loss)?;
+        let grads = loss.backward()?;
+        let finite = gradients_finite(&grads, self.opt_g.vars().map(|(_, v)| v))?;
+        if self.guard.allow("G", loss_g, finite) {
+            self.opt_g.step(&grads)?;
+            self.model.generator().mapping().update_w_avg(&fakes.w)?;
+        }
+        drop(grads);
+
+        // 2. D on fakes and reals.
+        let fakes = self.generate(Phase::D, step, data)?;
+        let reals = data.reals(b, stream_seed(seed, step, Stream::Crops, 0), &self.device)?;
+        let fake_logits = self.d.forward(&fakes.images.detach(), &fakes.omega)?;
+        let real_logits = self.d.forward(&reals.images, &reals.omega)?;
+        let loss = discriminator_loss(&real_logits, &fake_logits)?;
+        let loss_d = scalar(&loss)?;
+        let grads = loss.backward()?;
+        let finite = gradients_finite(&grads, self.opt_d.vars().map(|(_, v)| v))?;
+        if self.guard.allow("D", loss_d, finite) {
+            self.opt_d.step(&grads)?;
+        }
+        drop(grads);
+
+        // 3. Lazy R1 on the same reals.
+        let r1 = if step % self.config.r1_interval as u64 == 0 && self.config.r1_gamma > 0.0 {
+            let penalty = self.d.r1_penalty(&reals.images, &reals.omega)?;
+            let loss = r1_loss(&penalty, self.config.r1_gamma, self.config.r1_interval)?;
+            let value = scalar(&loss)?;
+            let grads = loss.backward()?;
+            let finite = gradients_finite(&grads, self.opt_d.vars().map(|(_, v)| v))?;
+            if self.guard.allow("R1", value, finite) {
+                self.opt_d.step(&grads)?;
+            }
+            Some(scalar(&penalty.mean_all()?)?)
+        } else {
+            None
+        };
+
+        // 4. G_ema.
+        let beta = ema_beta(
+            b,
+            self.config.ema_kimg,
+            self.config.ema_rampup,
+            self.images_seen(),
+        );
+        self.ema.update(beta)?;
+
+        let skipped = self.guard.end_step(step)?;
+        self.step += 1;
+        Ok(StepStats {
+            step,
+            loss_g,
+            loss_d,
+            real_logit: scalar(&real_logits.mean_all()?)?,
+            fake_logit: scalar(&fake_logits.mean_all()?)?,
+            r1,
+            skipped,
+        })
+    }
+}
+
+/// A scalar tensor's value as f64.
+fn scalar(t: &Tensor) -> Result<f64> {
+    t.to_dtype(DType::F64)?.to_scalar::<f64>()
+}
