@@ -88,6 +88,25 @@ impl EstimatorModel {
         })
     }
 
+    /// A new model like [`EstimatorModel::new`] whose initial parameters are drawn from
+    /// `seed` (the reference initialisers, values from a SplitMix64 stream per variable name,
+    /// [`photomat_generator::seeded_var_builder`]): the same seed gives the same model on
+    /// every machine, which makes training runs reproducible.
+    pub fn new_seeded(
+        brdf: Brdf,
+        config: EstimatorConfig,
+        seed: u64,
+        device: &Device,
+    ) -> Result<Self> {
+        let vars = VarMap::new();
+        // Creates every variable with its seeded value; `new` then finds them in `vars`.
+        Estimator::new(
+            config.clone(),
+            photomat_generator::seeded_var_builder(&vars, seed, DType::F32, device),
+        )?;
+        Self::new(brdf, config, vars, device)
+    }
+
     /// Loads `dir/estimator.json` and `dir/estimator.safetensors` onto `device`.
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let manifest = read_estimator_manifest(dir)?;

@@ -111,6 +111,21 @@ impl EstimatorConfig {
         }
     }
 
+    /// The same architecture with every encoder and decoder width multiplied by `width`
+    /// (rounded, at least 1); input and output widths unchanged. `width` 0.25 gives a model
+    /// with about 1/16 of the parameters for CPU training.
+    pub fn with_width(&self, width: f64) -> Result<Self> {
+        if !(width.is_finite() && width > 0.0) {
+            bail!("estimator width multiplier {width} must be positive and finite");
+        }
+        let scale = |c: &usize| ((*c as f64 * width).round() as usize).max(1);
+        Ok(Self {
+            encoder_channels: self.encoder_channels.iter().map(scale).collect(),
+            decoder_channels: self.decoder_channels.iter().map(scale).collect(),
+            ..self.clone()
+        })
+    }
+
     /// Factor by which the input side must be divisible: 2^(encoder levels).
     pub fn total_stride(&self) -> usize {
         1 << self.encoder_channels.len()
