@@ -37,11 +37,15 @@
 //!   contrast change of one set (the normalisation's intent).
 //!
 //! Plain Rust on f32 slices, no gradients; images run in parallel (rayon) and projections are
-//! candle matrix products.
+//! candle matrix products. [`model`] applies the metric to a GAN model and a data set.
 
 use candle_core::{DType, Device, Result, Tensor, bail};
 use photomat_kernels::SplitMix64;
 use rayon::prelude::*;
+
+pub mod model;
+
+pub use model::{EvalPhase, model_swd};
 
 /// Parameters of the metric. [`Default`] is the reference's configuration.
 #[derive(Debug, Clone, PartialEq)]
