@@ -1,0 +1,202 @@
+//! A MaterialX 1.38 document (ASWF, "MaterialX Specification" v1.38, and its
+//! "Physically Based Shading Nodes" / `UsdPreviewSurface` node definition) for one material.
+//!
+//! [`write_materialx`] writes `<stem>.mtlx` next to a [`TextureSet`]: a node graph of `image`
+//! nodes reading its PNGs (colour textures in `srgb_texture`, data textures `raw`), an
+//! `extract` of the roughness and clear-coat channels, a `normalmap` node (tangent space), a
+//! `UsdPreviewSurface` shader in the specular workflow (`specularColor` = F0 directly,
+//! `metallic` 0, `roughness` perceptual as ours) and a `surfacematerial`. UsdPreviewSurface is
+//! chosen over `standard_surface` because its specular workflow takes our F0 unchanged;
+//! MaterialX viewers (MaterialXView, usdview with MaterialX, Houdini) load it. The mapping
+//! and what it drops are those of [`crate::textures`]; they are repeated in an XML comment.
+//!
+//! The XML is written by hand with every attribute value escaped ([`escape`]); the structure
+//! is fixed, so no XML library is needed.
+
+use std::path::{Path, PathBuf};
+
+use photomat_core::image_io::write_atomic;
+use photomat_core::{Error, Result};
+
+use crate::textures::TextureSet;
+
+/// XML attribute / text escaping: `& < > " '`.
+pub fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            c => out.push(c),
+        }
+    }
+    out
+}
+
+/// Text safe inside an XML comment (`--` is not allowed there).
+fn comment_text(text: &str) -> String {
+    escape(text).replace("--", "- -")
+}
+
+/// A MaterialX element name: letters, digits and `_` (other characters become `_`; a leading
+/// digit gets a `M_` prefix), as the specification requires of names.
+pub fn element_name(text: &str) -> String {
+    let mut name: String = text
+        .chars()
+        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+        .collect();
+    if name.is_empty() || name.starts_with(|c: char| c.is_ascii_digit()) {
+        name.insert_str(0, "M_");
+    }
+    name
+}
+
+/// The document text for `textures` (files relative to the document's folder); `name` names
+/// the material.
+pub fn materialx_document(textures: &TextureSet, name: &str) -> String {
+    let name = element_name(name);
+    let graph = format!("NG_{name}");
+    let mut x = String::new();
+    let mut line = |s: String| {
+        x.push_str(&s);
+        x.push('\n');
+    };
+    line(r#"<?xml version="1.0" encoding="UTF-8"?>"#.to_string());
+    line(r#"<materialx version="1.38">"#.to_string());
+    line(format!(
+        "  <!-- photomat material, BRDF model {} -->",
+        comment_text(&textures.model)
+    ));
+    for note in textures.dropped.iter() {
+        line(format!("  <!-- dropped: {} -->", comment_text(note)));
+    }
+    for note in textures.approximations.iter() {
+        line(format!("  <!-- approximation: {} -->", comment_text(note)));
+    }
+    line(format!(r#"  <nodegraph name="{graph}">"#));
+    let image = |line: &mut dyn FnMut(String), node: &str, kind: &str, file: &str, space: &str| {
+        line(format!(r#"    <image name="{node}" type="{kind}">"#));
+        line(format!(
+            r#"      <input name="file" type="filename" value="{}" colorspace="{space}" />"#,
+            escape(file)
+        ));
+        line(r#"      <input name="uaddressmode" type="string" value="periodic" />"#.into());
+        line(r#"      <input name="vaddressmode" type="string" value="periodic" />"#.into());
+        line("    </image>".into());
+    };
+    let extract = |line: &mut dyn FnMut(String), node: &str, from: &str, index: usize| {
+        line(format!(r#"    <extract name="{node}" type="float">"#));
+        line(format!(
+            r#"      <input name="in" type="vector3" nodename="{from}" />"#
+        ));
+        line(format!(
+            r#"      <input name="index" type="integer" value="{index}" />"#
+        ));
+        line("    </extract>".into());
+    };
+    let output = |line: &mut dyn FnMut(String), out: &str, kind: &str, node: &str| {
+        line(format!(
+            r#"    <output name="{out}" type="{kind}" nodename="{node}" />"#
+        ));
+    };
+    // (shader input, type, graph output) of every connected input.
+    let mut connected: Vec<(&str, &str, &str)> = Vec::new();
+    if let Some(file) = &textures.base_color {
+        image(
+            &mut line,
+            "base_color_image",
+            "color3",
+            file,
+            "srgb_texture",
+        );
+        output(&mut line, "out_diffuse", "color3", "base_color_image");
+        connected.push(("diffuseColor", "color3", "out_diffuse"));
+    }
+    if let Some(file) = &textures.specular_color {
+        image(&mut line, "specular_image", "color3", file, "srgb_texture");
+        output(&mut line, "out_specular", "color3", "specular_image");
+        connected.push(("specularColor", "color3", "out_specular"));
+    }
+    if let Some(file) = &textures.metallic_roughness {
+        image(
+            &mut line,
+            "metallic_roughness_image",
+            "vector3",
+            file,
+            "raw",
+        );
+        extract(&mut line, "roughness", "metallic_roughness_image", 1);
+        output(&mut line, "out_roughness", "float", "roughness");
+        connected.push(("roughness", "float", "out_roughness"));
+    }
+    if let Some(file) = &textures.normal {
+        image(&mut line, "normal_image", "vector3", file, "raw");
+        line(r#"    <normalmap name="normal_map" type="vector3">"#.into());
+        line(r#"      <input name="in" type="vector3" nodename="normal_image" />"#.into());
+        line(r#"      <input name="space" type="string" value="tangent" />"#.into());
+        line("    </normalmap>".into());
+        output(&mut line, "out_normal", "vector3", "normal_map");
+        connected.push(("normal", "vector3", "out_normal"));
+    }
+    if let Some(file) = &textures.clearcoat {
+        image(&mut line, "clearcoat_image", "vector3", file, "raw");
+        extract(&mut line, "clearcoat", "clearcoat_image", 0);
+        extract(&mut line, "clearcoat_roughness", "clearcoat_image", 1);
+        output(&mut line, "out_clearcoat", "float", "clearcoat");
+        output(
+            &mut line,
+            "out_clearcoat_roughness",
+            "float",
+            "clearcoat_roughness",
+        );
+        connected.push(("clearcoat", "float", "out_clearcoat"));
+        connected.push(("clearcoatRoughness", "float", "out_clearcoat_roughness"));
+    }
+    line("  </nodegraph>".into());
+    let shader = format!("SR_{name}");
+    line(format!(
+        r#"  <UsdPreviewSurface name="{shader}" type="surfaceshader">"#
+    ));
+    line(r#"    <input name="useSpecularWorkflow" type="integer" value="1" />"#.into());
+    line(r#"    <input name="metallic" type="float" value="0" />"#.into());
+    for (input, kind, out) in &connected {
+        line(format!(
+            r#"    <input name="{input}" type="{kind}" nodegraph="{graph}" output="{out}" />"#
+        ));
+    }
+    let has = |input: &str| connected.iter().any(|(i, _, _)| *i == input);
+    // Defaults for maps the model lacks: no diffuse → black base; no specular → no lobe; no
+    // roughness → fully rough.
+    if !has("diffuseColor") {
+        line(r#"    <input name="diffuseColor" type="color3" value="0, 0, 0" />"#.into());
+    }
+    if !has("specularColor") {
+        line(r#"    <input name="specularColor" type="color3" value="0, 0, 0" />"#.into());
+    }
+    if !has("roughness") {
+        line(r#"    <input name="roughness" type="float" value="1" />"#.into());
+    }
+    line("  </UsdPreviewSurface>".into());
+    line(format!(
+        r#"  <surfacematerial name="{name}" type="material">"#
+    ));
+    line(format!(
+        r#"    <input name="surfaceshader" type="surfaceshader" nodename="{shader}" />"#
+    ));
+    line("  </surfacematerial>".into());
+    line("</materialx>".into());
+    x
+}
+
+/// Write `dir/<stem>.mtlx` for `textures`, whose files lie in `dir`. Returns its path.
+pub fn write_materialx(dir: &Path, stem: &str, textures: &TextureSet) -> Result<PathBuf> {
+    let path = dir.join(format!("{stem}.mtlx"));
+    if !dir.is_dir() {
+        return Err(Error::file(dir, "the MaterialX folder does not exist"));
+    }
+    write_atomic(&path, materialx_document(textures, stem).as_bytes())?;
+    Ok(path)
+}
