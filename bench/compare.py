@@ -1,0 +1,173 @@
+#!/usr/bin/env python3
+"""Runs `photomat bench` and the PyTorch script side by side and prints a markdown table.
+
+    python3 bench/compare.py                      # threads 2 and 1, 2 rounds, release build
+    python3 bench/compare.py --threads 2 --rounds 3 --iters 5
+
+For every thread count and configuration (`--configs`, default: all cases at 64², sampling
+and the E step at 256²) it runs the two implementations alternately, round after round
+(photomat, PyTorch, photomat, PyTorch, ...), so that load from other jobs on the machine hits
+both alike; each run reports per case the median of its timed iterations. The table gives,
+per case, the median over rounds of those medians for each side, and the median over rounds
+of the per-round ratio photomat / PyTorch (< 1: photomat is faster). Convolution and sgemm
+cases also show GFLOP/s and the share of the sgemm ceiling: the faster of the two sides'
+1024² sgemm in the same run. The load average is printed with every run.
+
+Before timing, it checks that both sides built networks with exactly the same parameter
+counts (G, its buffers, M, D, E) and stops if not. Raw reports go to `--out` (JSON).
+Standard library only; PyTorch comes from bench/pytorch/.venv (bench/pytorch/setup.sh).
+"""
+
+import argparse
+import json
+import os
+import statistics
+import subprocess
+import sys
+import time
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+VENV_PYTHON = os.path.join(ROOT, "bench", "pytorch", ".venv", "bin", "python")
+SCRIPT = os.path.join(ROOT, "bench", "pytorch", "bench_steps.py")
+PHOTOMAT = os.path.join(ROOT, "target", "release", "photomat")
+DEFAULT_CONFIGS = "64:all;256:sample,e_step"
+
+
+def parse_args():
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--threads", default="2,1", help="thread counts, comma-separated")
+    p.add_argument("--rounds", type=int, default=2, help="alternating runs per side")
+    p.add_argument("--iters", type=int, default=3, help="timed iterations per case and run")
+    p.add_argument("--warmup", type=int, default=1)
+    p.add_argument("--multiplier", type=float, default=0.25)
+    p.add_argument("--batch", type=int, default=4)
+    p.add_argument("--configs", default=DEFAULT_CONFIGS,
+                   help="SIZE:CASES;SIZE:CASES with CASES 'all' or a comma list "
+                        f"(default {DEFAULT_CONFIGS!r})")
+    p.add_argument("--skip-build", action="store_true",
+                   help="use the existing target/release/photomat")
+    p.add_argument("--out", default=os.path.join(ROOT, "target", "bench"),
+                   help="folder for the raw JSON reports")
+    a = p.parse_args()
+    a.threads = [int(t) for t in a.threads.split(",") if t]
+    configs = []
+    for item in a.configs.split(";"):
+        size, _, cases = item.partition(":")
+        configs.append((int(size), None if cases in ("", "all") else cases))
+    a.configs = configs
+    if a.rounds < 1 or a.iters < 1 or not a.threads:
+        p.error("--rounds, --iters and --threads need at least 1")
+    return a
+
+
+def load():
+    return "%.2f %.2f %.2f" % os.getloadavg()
+
+
+def run_side(side, threads, size, cases, a):
+    common = ["--size", str(size), "--multiplier", str(a.multiplier), "--batch", str(a.batch),
+              "--iters", str(a.iters), "--warmup", str(a.warmup), "--json"]
+    if cases:
+        common += ["--cases", cases]
+    env = dict(os.environ)
+    if side == "photomat":
+        cmd = [PHOTOMAT, "bench"] + common
+        env["RAYON_NUM_THREADS"] = str(threads)
+    else:
+        cmd = [VENV_PYTHON, SCRIPT, "--threads", str(threads)] + common
+        env["OMP_NUM_THREADS"] = env["MKL_NUM_THREADS"] = str(threads)
+    before = load()
+    start = time.time()
+    done = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          text=True)
+    if done.returncode != 0:
+        sys.exit(f"{side} failed ({' '.join(cmd)}):\n{done.stderr[-3000:]}")
+    report = json.loads(done.stdout)
+    print(f"  {side:<8} {threads} thread(s) {size}²: {time.time() - start:5.0f} s, "
+          f"load {before} -> {load()}", flush=True)
+    if report["threads"] != threads:
+        sys.exit(f"{side} ran with {report['threads']} threads, {threads} requested")
+    return report
+
+
+def check_parameters(reports):
+    ours, theirs = reports["photomat"][0]["parameters"], reports["pytorch"][0]["parameters"]
+    if ours != theirs:
+        sys.exit(f"parameter counts differ: photomat {ours}, PyTorch {theirs}")
+    return ours
+
+
+def table(results):
+    """results: list of (config, {side: [report per round]}) for one thread count."""
+    by = {}
+    for _, reports in results:
+        for side, runs in reports.items():
+            for r, rep in enumerate(runs):
+                for c in rep["cases"]:
+                    by.setdefault((c["name"], c["size"]), {}).setdefault(side, {})[r] = c
+    ceiling = max(
+        (c["flops"] / c["median_s"] for (name, _), sides in by.items() if name == "sgemm"
+         for runs in sides.values() for c in runs.values()),
+        default=None)
+    lines = ["| case | size | batch | photomat s | PyTorch s | ratio photomat/PyTorch "
+             "| photomat GFLOP/s | PyTorch GFLOP/s |",
+             "|---|---|---|---|---|---|---|---|"]
+    for (name, size), sides in by.items():
+        ours, theirs = sides["photomat"], sides["pytorch"]
+        rounds = sorted(set(ours) & set(theirs))
+        o = statistics.median(ours[r]["median_s"] for r in rounds)
+        t = statistics.median(theirs[r]["median_s"] for r in rounds)
+        ratio = statistics.median(ours[r]["median_s"] / theirs[r]["median_s"] for r in rounds)
+        flops = ours[rounds[0]]["flops"]
+
+        def rate(seconds):
+            if not flops:
+                return "–"
+            g = flops / seconds / 1e9
+            share = f" ({100 * flops / seconds / ceiling:.0f} %)" if ceiling else ""
+            return f"{g:.1f}{share}"
+        lines.append(f"| {name} | {size}² | {ours[rounds[0]]['batch']} | {o:.4f} | {t:.4f} | "
+                     f"{ratio:.2f} | {rate(o)} | {rate(t)} |")
+    if ceiling:
+        lines.append(f"\nsgemm ceiling (faster side, 1024² f32): {ceiling / 1e9:.1f} GFLOP/s; "
+                     "percentages are shares of it.")
+    return "\n".join(lines)
+
+
+def main():
+    a = parse_args()
+    if not a.skip_build:
+        subprocess.run(["cargo", "build", "--release", "-p", "photomat-cli"], cwd=ROOT,
+                       check=True)
+    if not os.path.exists(VENV_PYTHON):
+        sys.exit(f"{VENV_PYTHON} is missing: run bench/pytorch/setup.sh first")
+    os.makedirs(a.out, exist_ok=True)
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    everything = {}
+    print(f"machine: {os.cpu_count()} CPUs, load {load()}", flush=True)
+    for threads in a.threads:
+        results = []
+        for size, cases in a.configs:
+            reports = {"photomat": [], "pytorch": []}
+            for _ in range(a.rounds):
+                for side in ("photomat", "pytorch"):
+                    reports[side].append(run_side(side, threads, size, cases, a))
+            params = check_parameters(reports)
+            print(f"  parameters equal on both sides at {size}²: {params}", flush=True)
+            results.append(((size, cases), reports))
+        everything[str(threads)] = [
+            {"size": s, "cases": c, "reports": r} for (s, c), r in results]
+        first = results[0][1]
+        print(f"\n### {threads} thread(s): {first['photomat'][0]['version']} vs PyTorch "
+              f"{first['pytorch'][0]['version']}, multiplier {a.multiplier}, "
+              f"{a.rounds} rounds × {a.iters} iterations (+{a.warmup} warm-up)\n")
+        print(table(results), flush=True)
+        print()
+    path = os.path.join(a.out, f"compare-{stamp}.json")
+    with open(path, "w") as f:
+        json.dump(everything, f, indent=1)
+    print(f"raw reports: {path}")
+
+
+if __name__ == "__main__":
+    main()
