@@ -37,7 +37,7 @@ use crate::equalized::{
     EqualizedConv2d, EqualizedLinear, LinearConfig, equalized_conv2d, equalized_linear,
 };
 use crate::fir::{blur_for_strided_conv, downsample2d};
-use crate::padding::{Padding, pad2d};
+use crate::padding::Padding;
 use crate::relight::{OMEGA_CHANNELS, RGB_CHANNELS};
 use crate::{BASE_RESOLUTION, GeneratorConfig};
 
@@ -76,9 +76,7 @@ impl DConv {
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
         let k = self.conv.kernel();
         let y = match (self.down, k) {
-            (false, _) => self
-                .conv
-                .conv_unpadded(&pad2d(x, k / 2, Padding::Zeros)?, 1)?,
+            (false, _) => self.conv.conv(x, 1, k / 2, Padding::Zeros)?,
             (true, 1) => self
                 .conv
                 .conv_unpadded(&downsample2d(x, Padding::Zeros)?, 1)?,

@@ -152,9 +152,33 @@ impl EqualizedConv2d {
     /// # Shapes
     /// (B, in, H, W) → (B, out, (H − k)/stride + 1, (W − k)/stride + 1).
     pub fn conv_unpadded(&self, x: &Tensor, stride: usize) -> Result<Tensor> {
+        self.conv(x, stride, 0, Padding::Zeros)
+    }
+
+    /// Convolution with `padding` texels of the given mode on every side, without bias:
+    /// photomat-kernels' im2col + gemm [`conv2d`](photomat_kernels::conv2d), differentiable
+    /// to any order (R1 through D), or explicit padding and candle's `conv2d` inside
+    /// [`photomat_kernels::with_reference_ops`].
+    ///
+    /// # Shapes
+    /// (B, in, H, W) → (B, out, (H + 2·padding − k)/stride + 1, likewise W).
+    pub fn conv(&self, x: &Tensor, stride: usize, padding: usize, mode: Padding) -> Result<Tensor> {
         let (_b, _c, _h, _w) = x.dims4()?;
         let w = self.weight.affine(self.weight_gain, 0.0)?;
-        x.conv2d(&w, 0, stride, 1, 1)
+        if photomat_kernels::reference_ops() {
+            return pad2d(x, padding, mode)?.conv2d(&w, 0, stride, 1, 1);
+        }
+        let spec = photomat_kernels::Conv2dSpec {
+            stride,
+            padding,
+            mode: mode.into(),
+        };
+        photomat_kernels::conv2d(x, &w, spec)
+    }
+
+    /// The bias (`None` for a layer without one), shape (out).
+    pub fn bias(&self) -> Option<&Tensor> {
+        self.bias.as_ref()
     }
 
     /// Adds the bias (if any) per channel.
@@ -173,7 +197,7 @@ impl EqualizedConv2d {
     /// # Shapes
     /// (B, in, H, W) → (B, out, H, W) for odd k.
     pub fn forward(&self, x: &Tensor, mode: Padding) -> Result<Tensor> {
-        let y = self.conv_unpadded(&pad2d(x, self.kernel() / 2, mode)?, 1)?;
+        let y = self.conv(x, 1, self.kernel() / 2, mode)?;
         self.add_bias(&y)
     }
 }

@@ -1,7 +1,8 @@
 //! The R1 penalty's gradient with respect to D's parameters is a double backward. candle 0.11
 //! gets it right only with `CANDLE_GRAD_DO_NOT_DETACH=1` (read once per thread, at the first
 //! `backward()`); this file verifies both halves of that fact against central finite
-//! differences on a tiny D. It holds a single test because it sets a process environment
+//! differences on a tiny D, and that D on photomat-kernels' ops gives the same double
+//! backward as on plain candle ops. It holds a single test because it sets a process environment
 //! variable.
 
 use anyhow::Result;
@@ -122,12 +123,22 @@ fn r1_gradient_matches_finite_differences_with_do_not_detach() -> Result<()> {
 
     // SAFETY: this test binary has a single test and no other thread is running now.
     unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
-    let (analytic, fd) = std::thread::spawn(|| -> Result<(Vec<f64>, Vec<f64>)> {
+    let (analytic, reference, fd) = std::thread::spawn(|| -> Result<_> {
         let s = setup()?;
-        Ok((analytic(&s)?, finite_differences(&s)?))
+        let reference = photomat_kernels::with_reference_ops(|| analytic(&s))?;
+        Ok((analytic(&s)?, reference, finite_differences(&s)?))
     })
     .join()
     .expect("thread")?;
+    // D runs on photomat-kernels' convolutions, FIR passes and activations; on plain candle
+    // ops the double backward must give the same numbers (f64, other summation orders:
+    // ≲ 1e-12 relative).
+    for ((name, i), (a, r)) in PROBES.iter().zip(analytic.iter().zip(&reference)) {
+        assert!(
+            (a - r).abs() <= 1e-9 * r.abs(),
+            "{name}[{i}]: kernels {a} vs plain candle {r}"
+        );
+    }
     // Measured (seed 1): derivatives 2.5e-6 … 8.7e-4, differences ≤ 4e-11 absolute and
     // ≤ 5e-6 relative. Tolerance: 1e-4 relative plus the 1e-10 rounding floor above; every
     // probe is ≥ 1e-6, 10⁴ times that floor, so a wrong or missing term cannot hide in it.
