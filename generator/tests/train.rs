@@ -1,0 +1,250 @@
+//! The GAN trainer on a tiny configuration and tiny simulated data (the data crate's
+//! simulator + `prepare`): D learns to separate reals from fakes without a non-finite value,
+//! runs are deterministic under their seed, a resumed run is bit-identical to an uninterrupted
+//! one, resuming another configuration names the field, and the NaN guard skips poisoned
+//! updates and stops a diverged run.
+//!
+//! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
+//! through one `Once`, so the variable is written before any test thread reads it.
+
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+use anyhow::Result;
+// Link the built-in BRDF plugins: the simulator renders with them.
+use candle_core::Device;
+use candle_nn::VarMap;
+use photomat_brdfs as _;
+use photomat_core::Highlight;
+use photomat_data::dataset::{PrepareOptions, prepare};
+use photomat_data::procedural::families;
+use photomat_data::simulator::{
+    CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig, simulate,
+};
+use photomat_generator::GeneratorConfig;
+use photomat_generator::train::{
+    DatasetSource, RealBatch, TrainConfig, Trainer, TrainingData, enable_second_order_gradients,
+};
+
+static ENV: Once = Once::new();
+
+fn second_order() {
+    ENV.call_once(enable_second_order_gradients);
+}
+
+/// 8 simulated photos of 64², prepared at 64 (= 2 × the 32² model).
+fn simulated_dataset(dir: &Path) -> Result<PathBuf> {
+    let (sim, data) = (dir.join("sim"), dir.join("data"));
+    let all = families();
+    let config = SimulationConfig {
+        count: 8,
+        size: 64,
+        seed: 3,
+        format: PhotoFormat::Png,
+        families: all.iter().map(|f| f.as_ref()).collect(),
+        camera: CameraSource::Phone(PhoneCamera::default()),
+        jitter: HighlightJitter::default(),
+    };
+    simulate(&sim, &config, false, &|| {})?;
+    let options = PrepareOptions {
+        size: 64,
+        progress: false,
+        ..PrepareOptions::default()
+    };
+    prepare(&sim.join("photos"), &data, &options)?;
+    Ok(data)
+}
+
+fn tiny_config(data: &Path, tileable: bool) -> TrainConfig {
+    let generator = GeneratorConfig {
+        resolution: 32,
+        channel_multiplier: 1.0 / 64.0,
+        latent_dim: 16,
+        feature_channels: 8,
+        relight_hidden: 8,
+        tileable,
+        ..Default::default()
+    };
+    let mut c = TrainConfig::new(generator, data.to_path_buf(), 4, 11);
+    // R1 every other step so that short runs exercise it; a higher lr so that a few steps
+    // move a model this small.
+    c.r1_interval = 2;
+    c.lr = 0.01;
+    c
+}
+
+/// Every state variable as raw values, by name.
+fn snapshot(vars: &VarMap) -> Vec<(String, Vec<f64>)> {
+    let data = vars.data().lock().unwrap();
+    let mut out: Vec<_> = data
+        .iter()
+        .map(|(n, v)| {
+            let values = v
+                .as_tensor()
+                .flatten_all()
+                .and_then(|t| t.to_dtype(candle_core::DType::F64))
+                .and_then(|t| t.to_vec1::<f64>())
+                .unwrap();
+            (n.clone(), values)
+        })
+        .collect();
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
+}
+
+fn mean(v: &[f64]) -> f64 {
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
+#[test]
+fn discriminator_learns_and_nothing_is_non_finite() -> Result<()> {
+    second_order();
+    let dir = tempfile::tempdir()?;
+    let data_dir = simulated_dataset(dir.path())?;
+    let config = tiny_config(&data_dir, false);
+    let data = DatasetSource::open(&data_dir, 32)?;
+    let mut trainer = Trainer::new(config, &Device::Cpu)?;
+    let mut gaps = Vec::new();
+    for _ in 0..16 {
+        let s = trainer.step(&data)?;
+        assert!(s.skipped.is_empty(), "step {}: {:?}", s.step, s.skipped);
+        for v in [s.loss_g, s.loss_d, s.real_logit, s.fake_logit] {
+            assert!(v.is_finite(), "{s:?}");
+        }
+        assert_eq!(s.r1.is_some(), s.step % 2 == 0, "{s:?}");
+        gaps.push(s.real_logit - s.fake_logit);
+    }
+    let (first, last) = (mean(&gaps[..4]), mean(&gaps[12..]));
+    assert!(
+        last > first + 0.1 && last > 0.0,
+        "D's real−fake logit gap did not grow: {gaps:?}"
+    );
+    // G_ema: parameters averaged (differ from G after training), w_avg copied.
+    let g = snapshot(trainer.model().vars());
+    let ema = snapshot(trainer.ema_model().vars());
+    let find =
+        |s: &[(String, Vec<f64>)], n: &str| s.iter().find(|(k, _)| k == n).unwrap().1.clone();
+    assert_eq!(find(&g, "g.mapping.w_avg"), find(&ema, "g.mapping.w_avg"));
+    assert_ne!(
+        find(&g, "g.mapping.fc0.weight"),
+        find(&ema, "g.mapping.fc0.weight")
+    );
+    assert!(find(&g, "g.mapping.w_avg").iter().any(|v| *v != 0.0));
+    // The saved inference model loads and generates finite features.
+    trainer.save_model(&dir.path().join("run"), serde_json::json!({"step": 16}))?;
+    let model = photomat_generator::GanModel::load(&dir.path().join("run"), &Device::Cpu)?;
+    let f = model.features_for_seeds(&[1, 2], 1.0)?;
+    assert!(f.abs()?.max_all()?.to_scalar::<f32>()?.is_finite());
+    Ok(())
+}
+
+#[test]
+fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
+    second_order();
+    let dir = tempfile::tempdir()?;
+    let data_dir = simulated_dataset(dir.path())?;
+    let data = DatasetSource::open(&data_dir, 32)?;
+    // Tileable: the per-sample roll is part of the draws that must repeat.
+    let config = tiny_config(&data_dir, true);
+
+    let mut whole = Trainer::new(config.clone(), &Device::Cpu)?;
+    for _ in 0..5 {
+        whole.step(&data)?;
+    }
+
+    let run = dir.path().join("run");
+    let mut first = Trainer::new(config.clone(), &Device::Cpu)?;
+    for _ in 0..3 {
+        first.step(&data)?;
+    }
+    first.save_state(&run)?;
+    drop(first);
+    let mut resumed = Trainer::new(config.clone(), &Device::Cpu)?;
+    resumed.load_state(&run)?;
+    assert_eq!(resumed.steps_done(), 3);
+    for _ in 0..2 {
+        resumed.step(&data)?;
+    }
+    let (a, b) = (snapshot(whole.state_vars()), snapshot(resumed.state_vars()));
+    assert_eq!(a.len(), b.len());
+    for ((na, va), (nb, vb)) in a.iter().zip(&b) {
+        assert_eq!(na, nb);
+        if na != "trainer.counters" {
+            assert!(va == vb, "`{na}` differs after resuming");
+        }
+    }
+
+    // Another configuration is refused, naming the field; the state is untouched.
+    let mut other = config.clone();
+    other.generator.channel_multiplier = 1.0 / 32.0;
+    let mut wrong = Trainer::new(other, &Device::Cpu)?;
+    let err = wrong.load_state(&run).err().unwrap().to_string();
+    assert!(err.contains("generator.channel_multiplier"), "{err}");
+    assert_eq!(wrong.steps_done(), 0);
+    Ok(())
+}
+
+/// [`DatasetSource`] whose real crops are all NaN while `poison` is set.
+struct Poisoned {
+    inner: DatasetSource,
+    poison: bool,
+}
+
+impl TrainingData for Poisoned {
+    fn reals(&self, batch: usize, seed: u64, device: &Device) -> candle_core::Result<RealBatch> {
+        let mut r = self.inner.reals(batch, seed, device)?;
+        if self.poison {
+            r.images = (r.images * f64::NAN)?;
+        }
+        Ok(r)
+    }
+
+    fn fake_highlights(&self, batch: usize, seed: u64) -> candle_core::Result<Vec<Highlight>> {
+        self.inner.fake_highlights(batch, seed)
+    }
+}
+
+#[test]
+fn nan_guard_skips_poisoned_updates_and_stops_a_diverged_run() -> Result<()> {
+    second_order();
+    let dir = tempfile::tempdir()?;
+    let data_dir = simulated_dataset(dir.path())?;
+    let mut config = tiny_config(&data_dir, false);
+    config.nan_limit = 3;
+    let mut data = Poisoned {
+        inner: DatasetSource::open(&data_dir, 32)?,
+        poison: false,
+    };
+    let mut trainer = Trainer::new(config, &Device::Cpu)?;
+    trainer.step(&data)?;
+
+    data.poison = true;
+    let d_before = snapshot(trainer.discriminator_vars());
+    let g_before = snapshot(trainer.model().vars());
+    let s = trainer.step(&data)?;
+    assert_eq!(s.skipped, ["D loss is NaN"], "{s:?}");
+    assert!(s.loss_g.is_finite());
+    assert_eq!(
+        snapshot(trainer.discriminator_vars()),
+        d_before,
+        "D was updated"
+    );
+    assert_ne!(
+        snapshot(trainer.model().vars()),
+        g_before,
+        "G was not updated"
+    );
+
+    // A clean step resets the streak; then three poisoned steps in a row stop the run.
+    data.poison = false;
+    assert!(trainer.step(&data)?.skipped.is_empty());
+    data.poison = true;
+    trainer.step(&data)?;
+    trainer.step(&data)?;
+    let err = trainer.step(&data).err().unwrap().to_string();
+    assert!(
+        err.contains("step 5") && err.contains("D loss is NaN") && err.contains("3 consecutive"),
+        "{err}"
+    );
+    Ok(())
+}
