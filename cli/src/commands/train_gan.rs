@@ -125,6 +125,13 @@ pub(crate) fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
     Ok(STOP.get_or_init(|| flag).clone())
 }
 
+/// `path` made absolute (symbolic links resolved) when it exists, so that `train.json` names
+/// the data set whatever the working directory of a later `--resume`; unchanged otherwise
+/// (opening it then reports the missing folder).
+fn absolute(path: &Path) -> PathBuf {
+    std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
 /// The configuration of a fresh run from the flags, with the reference hyper-parameters.
 fn fresh_config(args: &Args) -> anyhow::Result<TrainConfig> {
     let Some(data) = &args.data else {
@@ -148,7 +155,7 @@ fn fresh_config(args: &Args) -> anyhow::Result<TrainConfig> {
     };
     let mut config = TrainConfig::new(
         generator,
-        data.clone(),
+        absolute(data),
         args.batch.unwrap_or(DEFAULT_BATCH),
         args.seed.unwrap_or(0),
     );
@@ -179,7 +186,9 @@ fn resumed_config(args: &Args) -> anyhow::Result<TrainConfig> {
     check(
         "--data",
         "data",
-        args.data.as_ref().map(|p| p.display().to_string()),
+        args.data
+            .as_ref()
+            .map(|p| absolute(p).display().to_string()),
         saved.data.display().to_string(),
     );
     check(
