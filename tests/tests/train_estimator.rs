@@ -1,0 +1,188 @@
+//! `photomat train-estimator` end to end on a tiny GAN (issue 7): the run folder is a model
+//! folder that `EstimatorModel::load` and `GanModel::load` both read, with a log and panels;
+//! `--resume` continues where the run stopped; contradicting flags and unknown models are
+//! reported by name.
+
+use photomat_tests as _;
+
+use std::path::Path;
+
+use candle_core::Device;
+use photomat_core::image_io::png_header;
+use photomat_estimator::EstimatorModel;
+use photomat_generator::{GanModel, GeneratorConfig};
+
+/// Run `photomat ARGS…`, returning stdout.
+fn photomat(args: &[&str]) -> anyhow::Result<String> {
+    let mut out = Vec::new();
+    photomat_cli::run_with_output(
+        std::iter::once("photomat").chain(args.iter().copied()),
+        &mut out,
+    )?;
+    Ok(String::from_utf8(out).expect("UTF-8 output"))
+}
+
+/// The error of `photomat ARGS…` as the binary prints it.
+fn photomat_error(args: &[&str]) -> String {
+    match photomat(args) {
+        Ok(out) => panic!("photomat {args:?} should fail, printed:\n{out}"),
+        Err(e) => photomat_cli::format_error(&e),
+    }
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().expect("UTF-8 path")
+}
+
+/// A tiny untrained GAN model folder (32², 8 feature channels).
+fn tiny_gan(dir: &Path) -> anyhow::Result<GanModel> {
+    let cfg = GeneratorConfig {
+        resolution: 32,
+        channel_multiplier: 1.0 / 64.0,
+        latent_dim: 16,
+        feature_channels: 8,
+        relight_hidden: 8,
+        ..Default::default()
+    };
+    let gan = GanModel::new(&cfg, 4, &Device::Cpu)?;
+    gan.save(dir, serde_json::json!({"test": true}))?;
+    Ok(gan)
+}
+
+fn log_steps(run: &Path) -> Vec<u64> {
+    std::fs::read_to_string(run.join("log.csv"))
+        .expect("log.csv")
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect()
+}
+
+#[test]
+fn train_estimator_writes_a_loadable_model_folder_and_resumes() -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let (gan_dir, run) = (dir.path().join("gan"), dir.path().join("run"));
+    let gan = tiny_gan(&gan_dir)?;
+    let common = [
+        "--batch",
+        "2",
+        "--width",
+        "0.125",
+        "--seed",
+        "3",
+        "--panel-every",
+        "2",
+        "--checkpoint-every",
+        "2",
+    ];
+    let mut args = vec![
+        "train-estimator",
+        "--gan",
+        s(&gan_dir),
+        "--brdf",
+        "height(ggx)",
+        "--out",
+        s(&run),
+        "--steps",
+        "2",
+        "--finetune-steps",
+        "1",
+    ];
+    args.extend(common);
+    let out = photomat(&args)?;
+    assert!(out.contains("trained 3 steps"), "{out}");
+    assert!(out.contains("photomat sample --model"), "{out}");
+
+    // A model folder: E with its BRDF by name, and the GAN it decodes.
+    let model = EstimatorModel::load(&run, &Device::Cpu)?;
+    assert_eq!(model.brdf().name(), "height(ggx, scale=0.02)");
+    assert_eq!(
+        model.estimator().config().encoder_channels,
+        [4, 8, 16, 32, 32]
+    );
+    let copied = GanModel::load(&run, &Device::Cpu)?;
+    let (a, b) = (
+        gan.features_for_seeds(&[9], 1.0)?,
+        copied.features_for_seeds(&[9], 1.0)?,
+    );
+    let diff = (a - &b)?.abs()?.max_all()?.to_scalar::<f32>()?;
+    assert_eq!(diff, 0.0);
+    let maps = model.estimate(&b)?;
+    assert_eq!(maps.get("height")?.dims(), [1, 1, 32, 32]);
+
+    assert_eq!(log_steps(&run), [1, 2, 3]);
+    for step in ["step-000002.png", "step-000003.png"] {
+        let (_, h, w) = png_header(&run.join("panels").join(step))?;
+        // Two rows of 32² tiles: neural | analytic | 4 maps + derived normal.
+        assert_eq!((h, w), (2 * 32 + 4, 7 * 32 + 6 * 4), "{step}");
+    }
+
+    // Starting again in the same folder is refused; resuming continues at step 3.
+    let err = photomat_error(&args);
+    assert!(err.contains("--resume"), "{err}");
+    let out = photomat(&[
+        "train-estimator",
+        "--out",
+        s(&run),
+        "--resume",
+        "--finetune-steps",
+        "2",
+    ])?;
+    assert!(out.contains("trained 1 steps (4 in total)"), "{out}");
+    assert_eq!(log_steps(&run), [1, 2, 3, 4]);
+
+    // A contradicting flag names the field.
+    let err = photomat_error(&[
+        "train-estimator",
+        "--out",
+        s(&run),
+        "--resume",
+        "--seed",
+        "4",
+    ]);
+    assert!(err.contains("seed") && err.contains("train.json"), "{err}");
+    let err = photomat_error(&[
+        "train-estimator",
+        "--out",
+        s(&run),
+        "--resume",
+        "--brdf",
+        "lambert",
+    ]);
+    assert!(
+        err.contains("lambert") && err.contains("height(ggx"),
+        "{err}"
+    );
+    Ok(())
+}
+
+#[test]
+fn train_estimator_unknown_brdf_lists_the_known_models() -> anyhow::Result<()> {
+    let dir = tempfile::tempdir()?;
+    let gan_dir = dir.path().join("gan");
+    tiny_gan(&gan_dir)?;
+    let err = photomat_error(&[
+        "train-estimator",
+        "--gan",
+        s(&gan_dir),
+        "--brdf",
+        "no_such_model",
+        "--out",
+        s(&dir.path().join("run")),
+    ]);
+    assert!(
+        err.contains("no_such_model") && err.contains("ggx") && err.contains("lambert"),
+        "{err}"
+    );
+    let err = photomat_error(&[
+        "train-estimator",
+        "--gan",
+        s(&dir.path().join("missing")),
+        "--brdf",
+        "ggx",
+        "--out",
+        s(&dir.path().join("run")),
+    ]);
+    assert!(err.contains("gan.json"), "{err}");
+    Ok(())
+}
