@@ -1,0 +1,227 @@
+//! `photomat train-gan` through `photomat_cli::run_with_output` on tiny simulated data: a run
+//! writes its state, GAN model folder, log and samples; `--resume` continues byte-identically
+//! to an uninterrupted run and refuses contradicting flags; bad inputs fail naming the
+//! problem.
+//!
+//! `train-gan` sets `CANDLE_GRAD_DO_NOT_DETACH=1` (R1 needs second-order gradients) unless it
+//! is set; every test sets it first through one `Once`, so no test thread writes the
+//! environment while another reads it.
+
+use photomat_tests as _;
+
+use std::path::Path;
+use std::sync::Once;
+
+static ENV: Once = Once::new();
+
+fn second_order() {
+    // SAFETY: every test calls this before anything else, so no other test thread reads the
+    // environment while it is written.
+    ENV.call_once(|| unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") });
+}
+
+/// Run `photomat ARGS…`, returning stdout.
+fn photomat(args: &[&str]) -> anyhow::Result<String> {
+    let mut out = Vec::new();
+    photomat_cli::run_with_output(
+        std::iter::once("photomat").chain(args.iter().copied()),
+        &mut out,
+    )?;
+    Ok(String::from_utf8(out).expect("UTF-8 output"))
+}
+
+/// The error of `photomat ARGS…` as the binary prints it.
+fn photomat_error(args: &[&str]) -> String {
+    match photomat(args) {
+        Ok(out) => panic!("photomat {args:?} should fail, printed:\n{out}"),
+        Err(e) => photomat_cli::format_error(&e),
+    }
+}
+
+/// `count` simulated photos prepared at side `size` in `dir/data`.
+fn dataset(dir: &Path, size: u32) -> String {
+    let sim = dir.join("sim");
+    let data = dir.join("data");
+    photomat(&[
+        "simulate",
+        "--count",
+        "6",
+        "--size",
+        &(2 * size).to_string(),
+        "--format",
+        "png",
+        "--out",
+        sim.to_str().unwrap(),
+    ])
+    .unwrap();
+    photomat(&[
+        "prepare",
+        "--photos",
+        sim.join("photos").to_str().unwrap(),
+        "--out",
+        data.to_str().unwrap(),
+        "--size",
+        &size.to_string(),
+    ])
+    .unwrap();
+    data.to_str().unwrap().to_string()
+}
+
+/// The flags of a tiny 32² model.
+const TINY: [&str; 6] = [
+    "--size",
+    "32",
+    "--multiplier",
+    "0.015625",
+    "--latent-dim",
+    "16",
+];
+
+fn train(data: Option<&str>, run: &Path, extra: &[&str]) -> anyhow::Result<String> {
+    let mut args = vec!["train-gan", "--out", run.to_str().unwrap()];
+    if let Some(d) = data {
+        args.extend(["--data", d]);
+    }
+    args.extend(extra);
+    photomat(&args)
+}
+
+#[test]
+fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
+    second_order();
+    let dir = tempfile::tempdir().unwrap();
+    let data = dataset(dir.path(), 64);
+    let whole = dir.path().join("whole");
+    let flags: Vec<&str> = TINY
+        .iter()
+        .copied()
+        .chain(["--steps", "3", "--sample-every", "2", "--seed", "5"])
+        .collect();
+    let out = train(Some(&data), &whole, &flags).unwrap();
+    assert!(out.contains("trained 3 steps"), "{out}");
+    for f in [
+        "train.json",
+        "train_state.safetensors",
+        "gan.json",
+        "gan.safetensors",
+        "log.csv",
+        "samples/step-000002.png",
+        "samples/step-000003.png",
+    ] {
+        assert!(whole.join(f).is_file(), "{f} missing");
+    }
+    let log = std::fs::read_to_string(whole.join("log.csv")).unwrap();
+    let rows: Vec<&str> = log.lines().collect();
+    assert_eq!(rows.len(), 4, "{log}");
+    assert!(rows[0].starts_with("step,kimg,loss_g,loss_d"));
+    assert!(rows[3].starts_with("3,0.012,"), "{log}");
+    let manifest: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(whole.join("gan.json")).unwrap()).unwrap();
+    assert_eq!(manifest["provenance"]["step"], 3);
+    assert_eq!(manifest["architecture"]["resolution"], 32);
+
+    // 2 steps, then resume to 3: the same bytes as the uninterrupted run.
+    let split = dir.path().join("split");
+    let short: Vec<&str> = TINY
+        .iter()
+        .copied()
+        .chain(["--steps", "2", "--seed", "5"])
+        .collect();
+    train(Some(&data), &split, &short).unwrap();
+    let out = train(None, &split, &["--resume", "--steps", "3"]).unwrap();
+    assert!(out.contains("trained 1 steps (3 in total"), "{out}");
+    for f in ["train_state.safetensors", "gan.safetensors"] {
+        assert!(
+            std::fs::read(whole.join(f)).unwrap() == std::fs::read(split.join(f)).unwrap(),
+            "{f} differs between the resumed and the uninterrupted run"
+        );
+    }
+    let resumed_log = std::fs::read_to_string(split.join("log.csv")).unwrap();
+    assert_eq!(resumed_log.lines().count(), 4, "{resumed_log}");
+
+    // Contradicting flags name the field; a second fresh run into the folder is refused.
+    let err = photomat_error(&[
+        "train-gan",
+        "--out",
+        split.to_str().unwrap(),
+        "--resume",
+        "--steps",
+        "4",
+        "--size",
+        "64",
+    ]);
+    assert!(err.contains("generator.resolution"), "{err}");
+    let err = train(Some(&data), &split, &short).unwrap_err().to_string();
+    assert!(err.contains("--resume"), "{err}");
+}
+
+#[test]
+fn train_gan_errors_name_the_problem() {
+    second_order();
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let run_s = run.to_str().unwrap();
+    let missing = dir.path().join("no-such-data");
+
+    let err = photomat_error(&[
+        "train-gan",
+        "--data",
+        missing.to_str().unwrap(),
+        "--out",
+        run_s,
+        "--steps",
+        "1",
+    ]);
+    assert!(
+        err.contains("no-such-data") && err.contains("does not exist"),
+        "{err}"
+    );
+    assert!(!run.exists(), "a failed start left {run_s}");
+
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let err = photomat_error(&[
+        "train-gan",
+        "--data",
+        empty.to_str().unwrap(),
+        "--out",
+        run_s,
+        "--steps",
+        "1",
+    ]);
+    assert!(err.contains("empty") && err.contains("index.json"), "{err}");
+
+    let err = photomat_error(&[
+        "train-gan",
+        "--data",
+        "x",
+        "--out",
+        run_s,
+        "--steps",
+        "1",
+        "--size",
+        "48",
+    ]);
+    assert!(err.contains("--size 48"), "{err}");
+
+    // 32² photos are too small for a 32² model (crops come from 2R × 2R).
+    let data = dataset(dir.path(), 32);
+    let err = photomat_error(&[
+        "train-gan",
+        "--data",
+        &data,
+        "--out",
+        run_s,
+        "--steps",
+        "1",
+        "--size",
+        "32",
+    ]);
+    assert!(err.contains("32×32") && err.contains("64×64"), "{err}");
+
+    let err = photomat_error(&["train-gan", "--out", run_s, "--resume", "--steps", "1"]);
+    assert!(err.contains("train_state.safetensors"), "{err}");
+
+    let err = photomat_error(&["train-gan", "--data", &data, "--out", run_s]);
+    assert!(err.contains("--steps"), "{err}");
+}
