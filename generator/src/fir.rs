@@ -19,13 +19,18 @@
 //! resampled image is one period of the resampled tiling and resampling commutes with rolls.
 //!
 //! # Implementation
-//! Each axis is one product with a constant banded matrix (`out = M · x`), as the estimator's
-//! periodic upsampling: matmul has exact first and second derivatives in candle 0.11, where
-//! `upsample_nearest2d`'s backward is wrong and depthwise convolution is ≈ 80× slower
-//! (DESIGN §6). Dense matrices cost O(n) multiply-adds per output instead of 4, which is
-//! negligible up to 256² and still acceptable at 1024² next to the 3×3 convs.
+//! Each axis is one product with a constant banded matrix (`out = M · x`), built here once per
+//! call as compressed rows ([`photomat_kernels::AxisMatrix`]: 2 or 4 taps per row) and applied
+//! by photomat-kernels' sparse separable pass ([`photomat_kernels::separable`]): one pass per
+//! axis costing as many multiply-adds per output as the filter has taps, linear, so its
+//! backward is the pass of the transposed matrix and it is differentiable to any order (R1
+//! through D's blur and downsampling). Inside [`photomat_kernels::with_reference_ops`] (and on
+//! other devices) the same matrices are applied densely with candle's `matmul` ([`apply_separable`]),
+//! whose first and second derivatives are exact in candle 0.11, where `upsample_nearest2d`'s
+//! backward is wrong and depthwise convolution is ≈ 80× slower (DESIGN §6).
 
-use candle_core::{DType, Device, Result, Tensor, bail};
+use candle_core::{DType, Device, Result, Tensor};
+use photomat_kernels::AxisMatrix;
 
 use crate::padding::Padding;
 
@@ -34,117 +39,96 @@ pub const FIR_TAPS: [f64; 4] = [1.0, 3.0, 3.0, 1.0];
 /// Sum of [`FIR_TAPS`] (the normalisation).
 pub const FIR_SUM: f64 = 8.0;
 
-/// Adds `weight` at column `col` (an index that may fall outside 0 … n − 1) of `row`:
-/// wrapped for circular padding, dropped for zero padding.
-fn add_tap(m: &mut [f64], n: usize, row: usize, col: isize, weight: f64, mode: Padding) {
-    let inside = (0..n as isize).contains(&col);
-    match (inside, mode) {
-        (true, _) => m[row * n + col as usize] += weight,
-        (false, Padding::Circular) => m[row * n + col.rem_euclid(n as isize) as usize] += weight,
-        (false, Padding::Zeros) => {}
-    }
-}
-
-/// Builds a `rows` × `n` matrix whose row `r` applies `taps` to the inputs `start(r)`,
-/// `start(r) + 1`, … (indices outside the axis wrapped or dropped per `mode`).
-fn banded(
+/// Builds the `rows` × `n` matrix whose row `r`, with `(start, taps) = row(r)`, applies
+/// `taps` to the inputs `start`, `start + 1`, …: indices outside 0 … n − 1 wrapped for
+/// circular padding (adding onto the texel they land on), dropped for zero padding.
+fn banded<'a>(
     rows: usize,
     n: usize,
-    start: impl Fn(usize) -> isize,
-    taps: &[f64],
+    row: impl Fn(usize) -> (isize, &'a [f64]),
     mode: Padding,
-    dtype: DType,
-    device: &Device,
-) -> Result<Tensor> {
-    if n == 0 {
-        bail!("cannot resample an axis of length 0");
+) -> Result<AxisMatrix> {
+    let len = n as isize;
+    let rows: Vec<Vec<(usize, f64)>> = (0..rows)
+        .map(|r| {
+            let (start, taps) = row(r);
+            taps.iter()
+                .enumerate()
+                .filter_map(|(k, &t)| {
+                    let col = start + k as isize;
+                    match ((0..len).contains(&col), mode) {
+                        (true, _) => Some((col as usize, t)),
+                        (false, Padding::Circular) => Some((col.rem_euclid(len) as usize, t)),
+                        (false, Padding::Zeros) => None,
+                    }
+                })
+                .collect()
+        })
+        .collect();
+    AxisMatrix::from_rows(n, &rows)
+}
+
+/// The ×2 upsampling matrix of one axis as compressed rows (see [`upsample_matrix`]).
+pub fn upsample_axis(n: usize, mode: Padding) -> Result<AxisMatrix> {
+    // Zero-stuffing then filtering with gain 2 leaves two taps per output: row 2i reads
+    // x[i − 1], x[i] with 2·1/8, 2·3/8; row 2i + 1 reads x[i], x[i + 1] with 2·3/8, 2·1/8.
+    let g = 2.0 / FIR_SUM;
+    let even = [FIR_TAPS[0] * g, FIR_TAPS[2] * g];
+    let odd = [FIR_TAPS[1] * g, FIR_TAPS[3] * g];
+    banded(
+        2 * n,
+        n,
+        |r| {
+            let i = (r / 2) as isize;
+            if r % 2 == 0 {
+                (i - 1, &even)
+            } else {
+                (i, &odd)
+            }
+        },
+        mode,
+    )
+}
+
+/// The ×2 downsampling matrix of one axis as compressed rows (see [`downsample_matrix`]).
+pub fn downsample_axis(n: usize, mode: Padding) -> Result<AxisMatrix> {
+    if n % 2 != 0 {
+        candle_core::bail!("cannot downsample an axis of odd length {n}");
     }
-    let mut m = vec![0f64; rows * n];
-    for r in 0..rows {
-        for (k, &t) in taps.iter().enumerate() {
-            add_tap(&mut m, n, r, start(r) + k as isize, t, mode);
-        }
-    }
-    Tensor::from_vec(m, (rows, n), device)?.to_dtype(dtype)
+    let taps = FIR_TAPS.map(|t| t / FIR_SUM);
+    banded(n / 2, n, |j| (2 * j as isize - 1, &taps), mode)
+}
+
+/// The blur before a stride-2 3×3 conv as compressed rows (see [`blur_matrix`]).
+pub fn blur_axis(n: usize, mode: Padding) -> Result<AxisMatrix> {
+    let taps = FIR_TAPS.map(|t| t / FIR_SUM);
+    banded(n + 1, n, |m| (m as isize - 2, &taps), mode)
 }
 
 /// The ×2 upsampling matrix of one axis: `out = U · x`, (2n, n). Rows sum to 1 (in the
 /// interior, and everywhere for circular padding); columns sum to 2 (the upsampling gain).
 pub fn upsample_matrix(n: usize, mode: Padding, dtype: DType, device: &Device) -> Result<Tensor> {
-    // Zero-stuffing then filtering with gain 2 leaves two taps per output: row 2i reads
-    // x[i − 1], x[i] with 2·1/8, 2·3/8; row 2i + 1 reads x[i], x[i + 1] with 2·3/8, 2·1/8.
-    let mut m = vec![0f64; 2 * n * n];
-    if n == 0 {
-        bail!("cannot resample an axis of length 0");
-    }
-    for i in 0..n {
-        let i = i as isize;
-        add_tap(
-            &mut m,
-            n,
-            2 * i as usize,
-            i - 1,
-            FIR_TAPS[0] * 2.0 / FIR_SUM,
-            mode,
-        );
-        add_tap(
-            &mut m,
-            n,
-            2 * i as usize,
-            i,
-            FIR_TAPS[2] * 2.0 / FIR_SUM,
-            mode,
-        );
-        add_tap(
-            &mut m,
-            n,
-            2 * i as usize + 1,
-            i,
-            FIR_TAPS[1] * 2.0 / FIR_SUM,
-            mode,
-        );
-        add_tap(
-            &mut m,
-            n,
-            2 * i as usize + 1,
-            i + 1,
-            FIR_TAPS[3] * 2.0 / FIR_SUM,
-            mode,
-        );
-    }
-    Tensor::from_vec(m, (2 * n, n), device)?.to_dtype(dtype)
+    upsample_axis(n, mode)?.to_dense(dtype, device)
 }
 
 /// The ×2 downsampling matrix of one axis: `out = D · x`, (n/2, n); n must be even. Rows sum
 /// to 1 (in the interior, everywhere for circular padding).
 pub fn downsample_matrix(n: usize, mode: Padding, dtype: DType, device: &Device) -> Result<Tensor> {
-    if n % 2 != 0 {
-        bail!("cannot downsample an axis of odd length {n}");
-    }
-    let taps = FIR_TAPS.map(|t| t / FIR_SUM);
-    banded(n / 2, n, |j| 2 * j as isize - 1, &taps, mode, dtype, device)
+    downsample_axis(n, mode)?.to_dense(dtype, device)
 }
 
 /// The blur applied before a stride-2 3×3 conv: (n + 1, n), row m reads x[m − 2 … m + 1].
 pub fn blur_matrix(n: usize, mode: Padding, dtype: DType, device: &Device) -> Result<Tensor> {
-    let taps = FIR_TAPS.map(|t| t / FIR_SUM);
-    banded(n + 1, n, |m| m as isize - 2, &taps, mode, dtype, device)
+    blur_axis(n, mode)?.to_dense(dtype, device)
 }
 
-/// Applies `m_h` to the rows and `m_w` to the columns of every plane: `M_H · X · M_Wᵀ`.
+/// Applies `m_h` to the rows and `m_w` to the columns of every plane: `M_H · X · M_Wᵀ`, with
+/// dense matrices and candle's `matmul` ([`photomat_kernels::separable_reference`]).
 ///
 /// # Shapes
 /// x (B, C, H, W), m_h (H', H), m_w (W', W) → (B, C, H', W').
 pub fn apply_separable(x: &Tensor, m_h: &Tensor, m_w: &Tensor) -> Result<Tensor> {
-    let (b, c, h, w) = x.dims4()?;
-    let (h2, _) = m_h.dims2()?;
-    let (w2, _) = m_w.dims2()?;
-    // Columns: one large (B·C·H, W) · (W, W') product over contiguous rows.
-    let y = x.contiguous()?.reshape((b * c * h, w))?.matmul(&m_w.t()?)?;
-    // Rows: (H', H) · (H, W') per plane, the matrix broadcast with batch stride 0.
-    let y = y.reshape((b * c, h, w2))?;
-    let y = m_h.broadcast_left(b * c)?.matmul(&y)?;
-    y.reshape((b, c, h2, w2))
+    photomat_kernels::separable_reference(x, m_h, m_w)
 }
 
 /// StyleGAN2 ×2 FIR upsampling (`upfirdn2d.upsample2d`).
@@ -153,9 +137,7 @@ pub fn apply_separable(x: &Tensor, m_h: &Tensor, m_w: &Tensor) -> Result<Tensor>
 /// (B, C, H, W) → (B, C, 2H, 2W).
 pub fn upsample2d(x: &Tensor, mode: Padding) -> Result<Tensor> {
     let (_b, _c, h, w) = x.dims4()?;
-    let m_h = upsample_matrix(h, mode, x.dtype(), x.device())?;
-    let m_w = upsample_matrix(w, mode, x.dtype(), x.device())?;
-    apply_separable(x, &m_h, &m_w)
+    photomat_kernels::separable(x, &upsample_axis(h, mode)?, &upsample_axis(w, mode)?)
 }
 
 /// StyleGAN2 ×2 FIR downsampling (`upfirdn2d.downsample2d`).
@@ -164,9 +146,7 @@ pub fn upsample2d(x: &Tensor, mode: Padding) -> Result<Tensor> {
 /// (B, C, H, W) → (B, C, H/2, W/2); H and W even.
 pub fn downsample2d(x: &Tensor, mode: Padding) -> Result<Tensor> {
     let (_b, _c, h, w) = x.dims4()?;
-    let m_h = downsample_matrix(h, mode, x.dtype(), x.device())?;
-    let m_w = downsample_matrix(w, mode, x.dtype(), x.device())?;
-    apply_separable(x, &m_h, &m_w)
+    photomat_kernels::separable(x, &downsample_axis(h, mode)?, &downsample_axis(w, mode)?)
 }
 
 /// The blur before a stride-2 3×3 conv (see the module docs).
@@ -175,7 +155,5 @@ pub fn downsample2d(x: &Tensor, mode: Padding) -> Result<Tensor> {
 /// (B, C, H, W) → (B, C, H + 1, W + 1).
 pub fn blur_for_strided_conv(x: &Tensor, mode: Padding) -> Result<Tensor> {
     let (_b, _c, h, w) = x.dims4()?;
-    let m_h = blur_matrix(h, mode, x.dtype(), x.device())?;
-    let m_w = blur_matrix(w, mode, x.dtype(), x.device())?;
-    apply_separable(x, &m_h, &m_w)
+    photomat_kernels::separable(x, &blur_axis(h, mode)?, &blur_axis(w, mode)?)
 }
