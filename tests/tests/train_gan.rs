@@ -95,7 +95,18 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
     let flags: Vec<&str> = TINY
         .iter()
         .copied()
-        .chain(["--steps", "3", "--sample-every", "2", "--seed", "5"])
+        .chain([
+            "--steps",
+            "3",
+            "--sample-every",
+            "2",
+            "--seed",
+            "5",
+            "--swd-every",
+            "3",
+            "--swd-count",
+            "8",
+        ])
         .collect();
     let out = train(Some(&data), &whole, &flags).unwrap();
     assert!(out.contains("trained 3 steps"), "{out}");
@@ -115,6 +126,13 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
     assert_eq!(rows.len(), 4, "{log}");
     assert!(rows[0].starts_with("step,kimg,loss_g,loss_d"));
     assert!(rows[3].starts_with("3,0.012,"), "{log}");
+    // SWD on step 3 only (the last column).
+    let swd: Vec<&str> = rows[1..]
+        .iter()
+        .map(|r| r.rsplit(',').next().unwrap())
+        .collect();
+    assert_eq!(&swd[..2], ["", ""], "{log}");
+    assert!(swd[2].parse::<f64>().unwrap() > 0.0, "{log}");
     let manifest: serde_json::Value =
         serde_json::from_slice(&std::fs::read(whole.join("gan.json")).unwrap()).unwrap();
     assert_eq!(manifest["provenance"]["step"], 3);

@@ -1,6 +1,6 @@
 //! `photomat train-gan --data DATASET --out RUN (--steps N | --kimg K) [--size 64]
 //! [--multiplier 0.25] [--batch 4] [--seed S] [--tileable] [--lr 0.0025]
-//! [--checkpoint-every N] [--sample-every N] [--swd-every N] [--resume]`: trains the
+//! [--checkpoint-every N] [--sample-every N] [--swd-every N] [--swd-count N] [--resume]`: trains the
 //! relightable generator G, the relighting MLP M and the light-conditioned discriminator D on
 //! a prepared flash-photo data set (PhotoMat §3–4, issue 6; the step is
 //! `photomat_generator::train::Trainer`).
@@ -12,7 +12,10 @@
 //! - `gan.json` + `gan.safetensors`: the inference model (G_ema + M) with its provenance,
 //!   written with every checkpoint, so RUN is a GAN model folder for `photomat relight --gan
 //!   RUN` and `photomat train-estimator --gan RUN`;
-//! - `log.csv`: one row per step (losses, logits, R1, seconds, SWD when computed);
+//! - `log.csv`: one row per step (losses, logits, R1, seconds, and every `--swd-every` steps
+//!   the sliced Wasserstein distance ×10³ of `--swd-count` relit G_ema samples against as
+//!   many real crops, a fixed seeded set: `photomat_generator::swd::model_swd`, the value
+//!   `photomat eval-gan` prints);
 //! - `samples/step-NNNNNN.png`: five fixed materials of G_ema under four lights each, a real
 //!   crop at the end of each row.
 //!
@@ -31,6 +34,7 @@ use anyhow::{Context, bail};
 use candle_core::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use photomat_core::image_io::{PngBits, write_png};
+use photomat_generator::swd::{SwdConfig, model_swd};
 use photomat_generator::train::config::TrainConfig;
 use photomat_generator::train::log::{LogRow, TrainLog};
 use photomat_generator::train::samples::sample_grid;
@@ -42,6 +46,9 @@ use photomat_generator::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION};
 const DEFAULT_SIZE: usize = 64;
 /// Default channel multiplier for a fresh run (CPU-sized; the reference is 1).
 const DEFAULT_MULTIPLIER: f64 = 0.25;
+/// Key mixed into the run seed for the SWD's fixed draws (one fixed set of fakes and reals
+/// per run, so successive measurements compare).
+const SWD_SEED_KEY: u64 = 0x7472_6169_6E5F_7377; // "train_sw"
 /// Default batch (the reference trains 32 on 8 GPUs; 4 keeps a CPU step in seconds).
 const DEFAULT_BATCH: usize = 4;
 
@@ -103,6 +110,16 @@ pub struct Args {
     #[arg(long, value_name = "N", default_value_t = 500,
           value_parser = clap::value_parser!(u64).range(1..))]
     pub sample_every: u64,
+
+    /// Steps between SWD measurements of G_ema against the data set (logged in log.csv;
+    /// 0: never).
+    #[arg(long, value_name = "N", default_value_t = 1000)]
+    pub swd_every: u64,
+
+    /// Fakes and real crops per SWD measurement (a fixed, seeded set).
+    #[arg(long, value_name = "N", default_value_t = 64,
+          value_parser = clap::value_parser!(u64).range(1..))]
+    pub swd_count: u64,
 
     /// Continue the run in RUN from its last checkpoint.
     #[arg(long)]
@@ -373,6 +390,25 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         }
         let done = trainer.steps_done();
         let kimg = trainer.images_seen() as f64 / 1000.0;
+        let swd = if args.swd_every > 0 && done % args.swd_every == 0 {
+            bar.set_message(format!("measuring SWD on {} images", args.swd_count));
+            let report = model_swd(
+                trainer.ema_model(),
+                &data,
+                args.swd_count as usize,
+                trainer.config().seed ^ SWD_SEED_KEY,
+                &SwdConfig::default(),
+                &mut |_, _| bar.tick(),
+            )
+            .context("cannot measure the SWD")?;
+            bar.println(format!(
+                "step {done}: SWD×10³ {:.2} (per level {:?})",
+                report.mean, report.per_level
+            ));
+            Some(report.mean)
+        } else {
+            None
+        };
         log.append(&LogRow {
             step: done,
             kimg,
@@ -382,7 +418,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             fake_logit: stats.fake_logit,
             r1: stats.r1,
             seconds,
-            swd: None,
+            swd,
         })?;
         bar.set_position(done);
         bar.set_message(format!(
