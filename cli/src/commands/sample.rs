@@ -15,8 +15,9 @@
 //! - with `--gltf` / `--mtlx`: `export/material.gltf` (+ `.bin`) / `export/material.mtlx` and
 //!   their textures (`photomat_export`; what a model's mapping drops is printed).
 //!
-//! Plus, for the run, `OUT/contact_sheet.png` (a row per material: map previews, the 5 analytic
-//! renders, the 5 neural renders) and `OUT/summary.json`: seeds, per material and light the L1
+//! Plus, for the run, `OUT/contact_sheet.png` (a row per material — the first
+//! [`SHEET_MAX_ROWS`] — of map previews, the 5 analytic renders and the 5 neural renders, tiles
+//! at most [`SHEET_MAX_TILE`] pixels) and `OUT/summary.json`: seeds, per material and light the L1
 //! distance between analytic and neural render in display-encoded [0, 1] space, their means,
 //! and the wall time of each stage.
 //!
@@ -45,6 +46,13 @@ use super::previews::map_previews;
 /// Radius of the reference's four diagonal lights: `0.5·(cos θ, sin θ)` in the reference's
 /// plane coordinates, which span [−1, 1]; our plane spans [−½, ½] (DESIGN §2), so ¼.
 pub const REFERENCE_LIGHT_RADIUS: f64 = 0.25;
+
+/// Materials shown in the contact sheet (the first ones of the run): 64 rows of 128-pixel
+/// tiles are already an 8,400-pixel-tall image; the per-material PNGs hold every material.
+pub const SHEET_MAX_ROWS: usize = 64;
+
+/// Largest tile side in the contact sheet, in pixels (tiles are shrunk to it).
+pub const SHEET_MAX_TILE: usize = 128;
 
 /// Environment variable naming the default model folder.
 pub const MODEL_ENV: &str = "PHOTOMAT_MODEL";
@@ -282,10 +290,6 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         let stage = Instant::now();
         let analytic_tiles = images(&analytic, tile)?;
         let neural_tiles = images(&neural, tile)?;
-        let previews: Vec<PlanarImage> = map_previews(brdf.as_ref(), &maps)?
-            .into_iter()
-            .map(|(_, p)| resize(&p, tile))
-            .collect();
         let extras = (args.tileable || args.hextile)
             .then(|| brdf.shading_maps(&maps))
             .transpose()?;
@@ -354,10 +358,16 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         }
         timings.write += stage.elapsed().as_secs_f64();
 
-        let mut row = previews;
-        row.extend(analytic_tiles);
-        row.extend(neural_tiles);
-        rows.push(row);
+        if rows.len() < SHEET_MAX_ROWS {
+            let sheet_tile = tile.min(SHEET_MAX_TILE);
+            let mut row: Vec<PlanarImage> = map_previews(brdf.as_ref(), &maps)?
+                .into_iter()
+                .map(|(_, p)| resize(&p, sheet_tile))
+                .collect();
+            row.extend(analytic_tiles.iter().map(|t| resize(t, sheet_tile)));
+            row.extend(neural_tiles.iter().map(|t| resize(t, sheet_tile)));
+            rows.push(row);
+        }
         materials.push(MaterialSummary {
             seed,
             folder: folder.display().to_string(),
@@ -431,8 +441,13 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     )?;
     writeln!(
         out,
-        "  {}  a row per material: maps, 5 analytic renders, 5 neural renders",
-        sheet_path.display()
+        "  {}  a row per material{}: maps, 5 analytic renders, 5 neural renders",
+        sheet_path.display(),
+        if summary.seeds.len() > SHEET_MAX_ROWS {
+            format!(" (the first {SHEET_MAX_ROWS})")
+        } else {
+            String::new()
+        }
     )?;
     writeln!(
         out,
