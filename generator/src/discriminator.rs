@@ -32,7 +32,7 @@
 use candle_core::{D, Result, Tensor, bail};
 use candle_nn::VarBuilder;
 
-use crate::activation::lrelu;
+use crate::activation::{bias_lrelu, lrelu};
 use crate::equalized::{
     EqualizedConv2d, EqualizedLinear, LinearConfig, equalized_conv2d, equalized_linear,
 };
@@ -85,8 +85,11 @@ impl DConv {
                 .conv_unpadded(&blur_for_strided_conv(x, Padding::Zeros)?, 2)?,
             (true, k) => bail!("discriminator: no downsampling {k}×{k} conv"),
         };
-        let y = self.conv.add_bias(&y)?;
-        let y = if self.activate { lrelu(&y)? } else { y };
+        let y = match (self.activate, self.conv.bias()) {
+            (true, Some(b)) => bias_lrelu(&y, b)?,
+            (true, None) => lrelu(&y)?,
+            (false, _) => self.conv.add_bias(&y)?,
+        };
         if self.gain == 1.0 {
             Ok(y)
         } else {
@@ -224,7 +227,7 @@ impl Discriminator {
         }
         let x = minibatch_stddev(&x, self.mbstd_group_size, self.mbstd_channels)?;
         let x = self.conv.forward(&x)?;
-        let x = lrelu(&self.fc.forward(&x.flatten_from(1)?)?)?;
+        let x = self.fc.forward_lrelu(&x.flatten_from(1)?)?;
         self.out.forward(&x)
     }
 }

@@ -13,6 +13,7 @@
 use candle_core::{Result, Tensor, bail};
 use candle_nn::{Init, VarBuilder};
 
+use crate::activation::{bias_lrelu, lrelu};
 use crate::padding::{Padding, pad2d};
 
 /// Options of an [`EqualizedLinear`] layer.
@@ -89,6 +90,20 @@ impl EqualizedLinear {
         match &self.bias {
             Some(b) => y.broadcast_add(&b.affine(self.bias_gain, 0.0)?),
             None => Ok(y),
+        }
+    }
+
+    /// `lrelu(forward(x))` with the bias add fused into the activation
+    /// ([`crate::activation::bias_lrelu`]).
+    ///
+    /// # Shapes
+    /// (N, in) → (N, out).
+    pub fn forward_lrelu(&self, x: &Tensor) -> Result<Tensor> {
+        let (_n, _in) = x.dims2()?;
+        let y = x.matmul(&self.weight.affine(self.weight_gain, 0.0)?.t()?)?;
+        match &self.bias {
+            Some(b) => bias_lrelu(&y, &b.affine(self.bias_gain, 0.0)?),
+            None => lrelu(&y),
         }
     }
 

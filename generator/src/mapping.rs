@@ -20,7 +20,6 @@ use candle_core::{D, Result, Tensor, Var, bail};
 use candle_nn::{Init, VarBuilder};
 
 use crate::GeneratorConfig;
-use crate::activation::lrelu;
 use crate::equalized::{EqualizedLinear, LinearConfig, equalized_linear};
 
 /// ε of the RMS normalisation of z (justified in the module docs).
@@ -77,7 +76,7 @@ impl Mapping {
         let rms = (z.sqr()?.mean_keepdim(D::Minus1)? + Z_NORM_EPS)?.sqrt()?;
         let mut x = z.broadcast_div(&rms)?;
         for layer in &self.layers {
-            x = lrelu(&layer.forward(&x)?)?;
+            x = layer.forward_lrelu(&x)?;
         }
         Ok(x)
     }

@@ -18,7 +18,6 @@ use candle_core::{Result, Tensor, bail};
 use candle_nn::VarBuilder;
 
 use crate::GeneratorConfig;
-use crate::activation::lrelu;
 use crate::equalized::{EqualizedLinear, LinearConfig, equalized_linear};
 
 /// Channels of the per-texel light direction ω.
@@ -79,10 +78,11 @@ impl Relight {
         let last = self.layers.len() - 1;
         let mut x = rows.clone();
         for (i, layer) in self.layers.iter().enumerate() {
-            x = layer.forward(&x)?;
-            if i < last {
-                x = lrelu(&x)?;
-            }
+            x = if i < last {
+                layer.forward_lrelu(&x)?
+            } else {
+                layer.forward(&x)?
+            };
         }
         Ok(x)
     }

@@ -35,7 +35,7 @@
 use candle_core::{Result, Tensor, bail};
 use candle_nn::{Init, VarBuilder};
 
-use crate::activation::lrelu;
+use crate::activation::bias_lrelu;
 use crate::fir::upsample2d;
 use crate::mapping::Mapping;
 use crate::modulated_conv::{ModulatedConv2d, modulated_conv2d};
@@ -96,7 +96,7 @@ impl SynthesisLayer {
         };
         let y = self.conv.forward(&x, w)?;
         let y = self.noise.forward(&y, noise)?;
-        lrelu(&y.broadcast_add(&self.bias.reshape((1, (), 1, 1))?)?)
+        bias_lrelu(&y, &self.bias)
     }
 }
 
