@@ -34,6 +34,7 @@
 use photomat_core::image_io::PlanarImage;
 use photomat_core::{Error, Result};
 use photomat_kernels::SplitMix64;
+use rayon::prelude::*;
 
 /// √3.
 const SQRT3: f64 = 1.732_050_807_568_877_2;
@@ -239,87 +240,114 @@ pub fn hextile(
     if out_height == 0 || out_width == 0 {
         return Err(Error::Invalid("hex-tiling output must not be empty".into()));
     }
+    // Rows are independent: one task per row, each returning its row of every output.
+    let rows: Vec<Vec<Vec<f32>>> = (0..out_height)
+        .into_par_iter()
+        .map(|row| hextile_row(tiling, inputs, guide, row, out_width))
+        .collect();
     let mut outputs: Vec<PlanarImage> = inputs
         .iter()
         .map(|(i, _)| PlanarImage::filled(i.channels, out_height, out_width, 0.0))
         .collect();
-    let out_plane = out_height * out_width;
-    for row in 0..out_height {
-        for col in 0..out_width {
-            let st = [(col as f64 + 0.5) / w as f64, (row as f64 + 0.5) / h as f64];
-            let (bary, vertices) = triangle_grid(st, tiling.rate);
-            let copies = vertices.map(|v| tiling.copy(v));
-            // Where copy i samples, in input texel coordinates.
-            let at = copies.map(|k| {
-                let d = [st[0] - k.center[0], st[1] - k.center[1]];
-                let s = k.cos * d[0] + k.sin * d[1] + k.center[0] + k.offset[0];
-                let t = -k.sin * d[0] + k.cos * d[1] + k.center[1] + k.offset[1];
-                (s * w as f64, t * h as f64)
-            });
-            let mut weights = [0.0; 3];
-            for i in 0..3 {
-                let d = match guide {
-                    Some(g) => {
-                        let l = luminance(g, at[i].0, at[i].1);
-                        1.0 + tiling.contrast * (l - 1.0)
-                    }
-                    None => 1.0,
-                };
-                weights[i] = d * bary[i].max(0.0).powf(tiling.exponent);
+    for (row, values) in rows.iter().enumerate() {
+        for (output, values) in outputs.iter_mut().zip(values) {
+            for c in 0..output.channels {
+                let dst = (c * out_height + row) * out_width;
+                output.data[dst..dst + out_width]
+                    .copy_from_slice(&values[c * out_width..(c + 1) * out_width]);
             }
-            let sum: f64 = weights.iter().sum();
-            // Exactly one barycentric weight can be 1 and the others 0, never all 0; D ≥ 1 − k
-            // > 0 unless k = 1 with a black guide, where the plain weights take over.
-            let weights = if sum > 1e-300 {
-                weights.map(|x| x / sum)
-            } else {
-                let plain = bary.map(|b| b.max(0.0).powf(tiling.exponent));
-                let s: f64 = plain.iter().sum();
-                plain.map(|x| x / s)
+        }
+    }
+    Ok(outputs)
+}
+
+/// Row `row` of every output of [`hextile`]: per input, its channels one after the other
+/// (`channels × out_width` values).
+fn hextile_row(
+    tiling: &HexTiling,
+    inputs: &[(&PlanarImage, Content)],
+    guide: Option<&PlanarImage>,
+    row: usize,
+    out_width: usize,
+) -> Vec<Vec<f32>> {
+    let (h, w) = (inputs[0].0.height, inputs[0].0.width);
+    let mut rows: Vec<Vec<f32>> = inputs
+        .iter()
+        .map(|(i, _)| vec![0.0; i.channels * out_width])
+        .collect();
+    for col in 0..out_width {
+        let st = [(col as f64 + 0.5) / w as f64, (row as f64 + 0.5) / h as f64];
+        let (bary, vertices) = triangle_grid(st, tiling.rate);
+        let copies = vertices.map(|v| tiling.copy(v));
+        // Where copy i samples, in input texel coordinates.
+        let at = copies.map(|k| {
+            let d = [st[0] - k.center[0], st[1] - k.center[1]];
+            let s = k.cos * d[0] + k.sin * d[1] + k.center[0] + k.offset[0];
+            let t = -k.sin * d[0] + k.cos * d[1] + k.center[1] + k.offset[1];
+            (s * w as f64, t * h as f64)
+        });
+        let mut weights = [0.0; 3];
+        for i in 0..3 {
+            let d = match guide {
+                Some(g) => {
+                    let l = luminance(g, at[i].0, at[i].1);
+                    1.0 + tiling.contrast * (l - 1.0)
+                }
+                None => 1.0,
             };
-            let weights = if tiling.gain == 0.5 {
-                weights
-            } else {
-                gain3(weights, tiling.gain)
-            };
-            let t = row * out_width + col;
-            for ((input, content), output) in inputs.iter().zip(outputs.iter_mut()) {
-                match content {
-                    Content::Scalar => {
-                        for c in 0..input.channels {
-                            let v: f64 = (0..3)
-                                .map(|i| weights[i] * sample(input, c, at[i].0, at[i].1))
-                                .sum();
-                            output.data[c * out_plane + t] = v as f32;
-                        }
+            weights[i] = d * bary[i].max(0.0).powf(tiling.exponent);
+        }
+        let sum: f64 = weights.iter().sum();
+        // Exactly one barycentric weight can be 1 and the others 0, never all 0; D ≥ 1 − k
+        // > 0 unless k = 1 with a black guide, where the plain weights take over.
+        let weights = if sum > 1e-300 {
+            weights.map(|x| x / sum)
+        } else {
+            let plain = bary.map(|b| b.max(0.0).powf(tiling.exponent));
+            let s: f64 = plain.iter().sum();
+            plain.map(|x| x / s)
+        };
+        let weights = if tiling.gain == 0.5 {
+            weights
+        } else {
+            gain3(weights, tiling.gain)
+        };
+        for ((input, content), output) in inputs.iter().zip(rows.iter_mut()) {
+            match content {
+                Content::Scalar => {
+                    for c in 0..input.channels {
+                        let v: f64 = (0..3)
+                            .map(|i| weights[i] * sample(input, c, at[i].0, at[i].1))
+                            .sum();
+                        output[c * out_width + col] = v as f32;
                     }
-                    Content::TangentNormal => {
-                        let mut n = [0.0f64; 3];
-                        for i in 0..3 {
-                            let v = [0, 1, 2].map(|c| sample(input, c, at[i].0, at[i].1));
-                            // The copy's content turns by −θ in the y-up frame (θ acts on
-                            // (s, t) with t pointing down the rows).
-                            let (cs, sn) = (copies[i].cos, copies[i].sin);
-                            n[0] += weights[i] * (cs * v[0] + sn * v[1]);
-                            n[1] += weights[i] * (-sn * v[0] + cs * v[1]);
-                            n[2] += weights[i] * v[2];
-                        }
-                        let len = n.iter().map(|x| x * x).sum::<f64>().sqrt();
-                        // Blends of upper-hemisphere unit vectors have z > 0: len > 0.
-                        let n = if len > 1e-12 {
-                            n.map(|x| x / len)
-                        } else {
-                            [0.0, 0.0, 1.0]
-                        };
-                        for (c, x) in n.iter().enumerate() {
-                            output.data[c * out_plane + t] = *x as f32;
-                        }
+                }
+                Content::TangentNormal => {
+                    let mut n = [0.0f64; 3];
+                    for i in 0..3 {
+                        let v = [0, 1, 2].map(|c| sample(input, c, at[i].0, at[i].1));
+                        // The copy's content turns by −θ in the y-up frame (θ acts on
+                        // (s, t) with t pointing down the rows).
+                        let (cs, sn) = (copies[i].cos, copies[i].sin);
+                        n[0] += weights[i] * (cs * v[0] + sn * v[1]);
+                        n[1] += weights[i] * (-sn * v[0] + cs * v[1]);
+                        n[2] += weights[i] * v[2];
+                    }
+                    let len = n.iter().map(|x| x * x).sum::<f64>().sqrt();
+                    // Blends of upper-hemisphere unit vectors have z > 0: len > 0.
+                    let n = if len > 1e-12 {
+                        n.map(|x| x / len)
+                    } else {
+                        [0.0, 0.0, 1.0]
+                    };
+                    for (c, x) in n.iter().enumerate() {
+                        output[c * out_width + col] = *x as f32;
                     }
                 }
             }
         }
     }
-    Ok(outputs)
+    rows
 }
 
 #[cfg(test)]
