@@ -15,12 +15,19 @@ cases also show GFLOP/s and the share of the sgemm ceiling: the faster of the tw
 
 Before timing, it checks that both sides built networks with exactly the same parameter
 counts (G, its buffers, M, D, E) and stops if not. Raw reports go to `--out` (JSON).
+
+PyTorch runs with OMP_WAIT_POLICY=PASSIVE unless `--omp-wait-policy ACTIVE`: libgomp's
+default spin-waiting made a 2-thread PyTorch 1.4-7.5x slower while other jobs shared the two
+cores (build machine, load average 12: E step 5.4 s ACTIVE vs 0.72 s PASSIVE, conv3x3 1.34
+vs 0.96 s, mlp 1.53 vs 0.31 s), which would flatter photomat. ACTIVE is PyTorch's default
+and may be the faster one on an idle machine: compare both there.
 Standard library only; PyTorch comes from bench/pytorch/.venv (bench/pytorch/setup.sh).
 """
 
 import argparse
 import json
 import os
+import shutil
 import statistics
 import subprocess
 import sys
@@ -44,6 +51,8 @@ def parse_args():
     p.add_argument("--configs", default=DEFAULT_CONFIGS,
                    help="SIZE:CASES;SIZE:CASES with CASES 'all' or a comma list "
                         f"(default {DEFAULT_CONFIGS!r})")
+    p.add_argument("--omp-wait-policy", default="PASSIVE", choices=["PASSIVE", "ACTIVE"],
+                   help="OMP_WAIT_POLICY of the PyTorch side (default PASSIVE: see the docs)")
     p.add_argument("--skip-build", action="store_true",
                    help="use the existing target/release/photomat")
     p.add_argument("--out", default=os.path.join(ROOT, "target", "bench"),
@@ -64,18 +73,19 @@ def load():
     return "%.2f %.2f %.2f" % os.getloadavg()
 
 
-def run_side(side, threads, size, cases, a):
+def run_side(side, threads, size, cases, a, photomat):
     common = ["--size", str(size), "--multiplier", str(a.multiplier), "--batch", str(a.batch),
               "--iters", str(a.iters), "--warmup", str(a.warmup), "--json"]
     if cases:
         common += ["--cases", cases]
     env = dict(os.environ)
     if side == "photomat":
-        cmd = [PHOTOMAT, "bench"] + common
+        cmd = [photomat, "bench"] + common
         env["RAYON_NUM_THREADS"] = str(threads)
     else:
         cmd = [VENV_PYTHON, SCRIPT, "--threads", str(threads)] + common
         env["OMP_NUM_THREADS"] = env["MKL_NUM_THREADS"] = str(threads)
+        env["OMP_WAIT_POLICY"] = a.omp_wait_policy
     before = load()
     start = time.time()
     done = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -143,15 +153,21 @@ def main():
         sys.exit(f"{VENV_PYTHON} is missing: run bench/pytorch/setup.sh first")
     os.makedirs(a.out, exist_ok=True)
     stamp = time.strftime("%Y%m%d-%H%M%S")
+    # A private copy: other builds in the same tree cannot swap the binary between rounds.
+    photomat = os.path.join(a.out, f"photomat-{stamp}")
+    shutil.copy2(PHOTOMAT, photomat)
     everything = {}
-    print(f"machine: {os.cpu_count()} CPUs, load {load()}", flush=True)
+    commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT,
+                            stdout=subprocess.PIPE, text=True).stdout.strip()
+    print(f"machine: {os.cpu_count()} CPUs, load {load()}; photomat built at {commit}",
+          flush=True)
     for threads in a.threads:
         results = []
         for size, cases in a.configs:
             reports = {"photomat": [], "pytorch": []}
             for _ in range(a.rounds):
                 for side in ("photomat", "pytorch"):
-                    reports[side].append(run_side(side, threads, size, cases, a))
+                    reports[side].append(run_side(side, threads, size, cases, a, photomat))
             params = check_parameters(reports)
             print(f"  parameters equal on both sides at {size}²: {params}", flush=True)
             results.append(((size, cases), reports))
@@ -159,13 +175,15 @@ def main():
             {"size": s, "cases": c, "reports": r} for (s, c), r in results]
         first = results[0][1]
         print(f"\n### {threads} thread(s): {first['photomat'][0]['version']} vs PyTorch "
-              f"{first['pytorch'][0]['version']}, multiplier {a.multiplier}, "
+              f"{first['pytorch'][0]['version']} (OMP_WAIT_POLICY={a.omp_wait_policy}), "
+              f"multiplier {a.multiplier}, "
               f"{a.rounds} rounds × {a.iters} iterations (+{a.warmup} warm-up)\n")
         print(table(results), flush=True)
         print()
     path = os.path.join(a.out, f"compare-{stamp}.json")
     with open(path, "w") as f:
         json.dump(everything, f, indent=1)
+    os.remove(photomat)
     print(f"raw reports: {path}")
 
 
