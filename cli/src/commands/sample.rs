@@ -59,10 +59,9 @@ pub const MODEL_ENV: &str = "PHOTOMAT_MODEL";
 
 /// The bundled model folder of this source tree.
 pub fn bundled_model_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("..")
-        .join("models")
-        .join("demo")
+    let cli = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // The workspace root is the CLI crate's parent folder.
+    cli.parent().unwrap_or(cli).join("models").join("demo")
 }
 
 #[derive(Debug, clap::Args)]
