@@ -121,7 +121,7 @@ pub fn conv2d_reference(x: &Tensor, w: &Tensor, spec: Conv2dSpec) -> Result<Tens
 }
 
 /// Whether both operands can take the custom-op path (CPU, same dtype, f32 or f64).
-fn fast_path(a: &Tensor, b: &Tensor) -> Result<bool> {
+pub(crate) fn fast_path(a: &Tensor, b: &Tensor) -> Result<bool> {
     if a.dtype() != b.dtype() {
         bail!("conv2d: dtypes differ ({:?}, {:?})", a.dtype(), b.dtype());
     }
@@ -130,7 +130,7 @@ fn fast_path(a: &Tensor, b: &Tensor) -> Result<bool> {
 
 /// Sizes of one convolution, checked once.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-struct Geometry {
+pub(crate) struct Geometry {
     b: usize,
     ci: usize,
     h: usize,
@@ -146,7 +146,7 @@ struct Geometry {
 }
 
 impl Geometry {
-    fn new(
+    pub(crate) fn new(
         (b, ci, h, w): (usize, usize, usize, usize),
         (co, ci_w, kh, kw): (usize, usize, usize, usize),
         spec: Conv2dSpec,
@@ -187,15 +187,15 @@ impl Geometry {
         })
     }
 
-    fn x_shape(&self) -> Shape {
+    pub(crate) fn x_shape(&self) -> Shape {
         (self.b, self.ci, self.h, self.w).into()
     }
 
-    fn w_shape(&self) -> Shape {
+    pub(crate) fn w_shape(&self) -> Shape {
         (self.co, self.ci, self.kh, self.kw).into()
     }
 
-    fn y_shape(&self) -> Shape {
+    pub(crate) fn y_shape(&self) -> Shape {
         (self.b, self.co, self.ho, self.wo).into()
     }
 
@@ -443,7 +443,13 @@ fn over_batch<R: Send>(
 }
 
 /// Forward: writes every element of `y` (B·C_out·H_out·W_out).
-fn forward_into<T: WithDType>(g: &Geometry, x: &[T], w: &[T], y: &mut [T], threads: usize) {
+pub(crate) fn forward_into<T: WithDType>(
+    g: &Geometry,
+    x: &[T],
+    w: &[T],
+    y: &mut [T],
+    threads: usize,
+) {
     let (x_len, y_len, k) = (g.ci * g.h * g.w, g.co * g.ho * g.wo, g.k());
     let n_out = g.ho * g.wo;
     let y_addr = y.as_mut_ptr() as usize;
@@ -572,7 +578,7 @@ fn weight_grad_into<T: WithDType>(g: &Geometry, x: &[T], dy: &[T], dw: &mut [T],
 }
 
 /// The contiguous slice of a storage, or an error naming the op.
-fn contiguous<'a, T>(v: &'a [T], layout: &Layout, op: &str) -> Result<&'a [T]> {
+pub(crate) fn contiguous<'a, T>(v: &'a [T], layout: &Layout, op: &str) -> Result<&'a [T]> {
     match layout.contiguous_offsets() {
         Some((start, end)) => Ok(&v[start..end]),
         None => bail!("{op}: expected a contiguous tensor"),
@@ -580,7 +586,7 @@ fn contiguous<'a, T>(v: &'a [T], layout: &Layout, op: &str) -> Result<&'a [T]> {
 }
 
 /// Checks a CPU operand's shape against the geometry.
-fn expect_shape(layout: &Layout, shape: &Shape, op: &str, what: &str) -> Result<()> {
+pub(crate) fn expect_shape(layout: &Layout, shape: &Shape, op: &str, what: &str) -> Result<()> {
     if layout.shape() != shape {
         bail!(
             "{op}: {what} has shape {:?}, expected {shape:?}",
@@ -660,11 +666,11 @@ fn apply_forward(g: Geometry, x: &Tensor, w: &Tensor) -> Result<Tensor> {
     x.contiguous()?.apply_op2(&w.contiguous()?, Forward(g))
 }
 
-fn apply_input_grad(g: Geometry, dy: &Tensor, w: &Tensor) -> Result<Tensor> {
+pub(crate) fn apply_input_grad(g: Geometry, dy: &Tensor, w: &Tensor) -> Result<Tensor> {
     dy.contiguous()?.apply_op2(&w.contiguous()?, InputGrad(g))
 }
 
-fn apply_weight_grad(g: Geometry, x: &Tensor, dy: &Tensor) -> Result<Tensor> {
+pub(crate) fn apply_weight_grad(g: Geometry, x: &Tensor, dy: &Tensor) -> Result<Tensor> {
     x.contiguous()?.apply_op2(&dy.contiguous()?, WeightGrad(g))
 }
 

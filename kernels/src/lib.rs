@@ -13,6 +13,8 @@
 //!   as one fused element-wise pass each way, differentiable to any order ([`activation`]).
 //! - [`fir`]: separable FIR filtering/resampling, one sparse constant matrix per axis
 //!   (StyleGAN2's `upfirdn2d` with the `[1, 3, 3, 1]` filter), differentiable to any order.
+//! - [`modulated_conv2d`]: StyleGAN2's modulated convolution (input styles, shared-weight
+//!   conv, output demodulation) as one op with a seven-pass backward ([`modulated_conv`]).
 //! - [`reference`]: a per-thread switch sending every op to its candle reference composition
 //!   (equivalence tests, same-process baselines).
 //! - [`alloc`]: the global allocator (mimalloc, opt-in feature) and thread count binaries use.
@@ -27,6 +29,7 @@ pub mod circular_pad;
 pub mod conv;
 pub mod conv_grad;
 pub mod fir;
+pub mod modulated_conv;
 pub mod reference;
 pub mod splitmix;
 pub mod testing;
@@ -36,5 +39,6 @@ pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use conv::{Conv2dSpec, PaddingMode, conv2d, conv2d_reference};
 pub use conv_grad::conv2d_fast_backward;
 pub use fir::{AxisMatrix, separable, separable_reference};
+pub use modulated_conv::{modulated_conv2d, modulated_conv2d_reference};
 pub use reference::{reference_ops, with_reference_ops};
 pub use splitmix::SplitMix64;
