@@ -515,6 +515,12 @@ fn time_case(
     .with_context(|| format!("benchmark case {} failed", case.name()))
 }
 
+/// Whether candle keeps the graph of gradients: `CANDLE_GRAD_DO_NOT_DETACH` set, non-empty and
+/// not "0" (candle 0.11's own reading of the variable, `backprop.rs`).
+fn second_order_gradients() -> bool {
+    std::env::var("CANDLE_GRAD_DO_NOT_DETACH").is_ok_and(|v| !v.is_empty() && v != "0")
+}
+
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     validate(args)?;
     if args.cases.iter().any(|c| c.is_gan()) {
@@ -543,7 +549,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         batch: args.batch,
         iters: args.iters,
         warmup: args.warmup,
-        second_order_gradients: std::env::var_os("CANDLE_GRAD_DO_NOT_DETACH").is_some(),
+        second_order_gradients: second_order_gradients(),
         parameters: setup.parameters,
         cases,
     };
