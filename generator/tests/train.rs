@@ -243,7 +243,7 @@ fn nan_guard_skips_poisoned_updates_and_stops_a_diverged_run() -> Result<()> {
     trainer.step(&data)?;
     let err = trainer.step(&data).err().unwrap().to_string();
     assert!(
-        err.contains("step 5") && err.contains("D loss is NaN") && err.contains("3 consecutive"),
+        err.contains("step 6") && err.contains("D loss is NaN") && err.contains("3 consecutive"),
         "{err}"
     );
     Ok(())

@@ -137,8 +137,16 @@ pub(crate) fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
     }
     let flag = Arc::new(AtomicBool::new(false));
     let handler_flag = flag.clone();
-    ctrlc::set_handler(move || handler_flag.store(true, Ordering::SeqCst))
-        .context("cannot install the Ctrl-C handler")?;
+    ctrlc::set_handler(move || {
+        // A second Ctrl-C while the step finishes exits at once: checkpoints are written
+        // atomically, so the last one stays intact (130 = 128 + SIGINT, the shell's code).
+        if handler_flag.swap(true, Ordering::SeqCst) {
+            eprintln!("\ninterrupted twice: exiting without saving the current step");
+            std::process::exit(130);
+        }
+        eprintln!("\nCtrl-C: finishing the current step, then saving (Ctrl-C again to quit now)");
+    })
+    .context("cannot install the Ctrl-C handler")?;
     Ok(STOP.get_or_init(|| flag).clone())
 }
 
@@ -378,15 +386,20 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     bar.set_position(start_step);
     let mut interrupted = false;
     let mut seconds_total = 0.0;
+    let mut phases = [0.0f64; 5];
     while trainer.steps_done() < total {
         let t0 = Instant::now();
         let stats = trainer
             .step(&data)
-            .with_context(|| format!("training step {} failed", trainer.steps_done()))?;
+            .with_context(|| format!("training step {} failed", trainer.steps_done() + 1))?;
         let seconds = t0.elapsed().as_secs_f64();
         seconds_total += seconds;
+        let p = stats.seconds;
+        for (acc, v) in phases.iter_mut().zip([p.g, p.d, p.data, p.r1, p.ema]) {
+            *acc += v;
+        }
         for s in &stats.skipped {
-            bar.println(format!("step {}: skipped the update: {s}", stats.step));
+            bar.println(format!("step {}: skipped the update: {s}", stats.step + 1));
         }
         let done = trainer.steps_done();
         let kimg = trainer.images_seen() as f64 / 1000.0;
@@ -457,7 +470,16 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             trainer.steps_done(),
             trainer.images_seen() as f64 / 1000.0,
             if steps_run > 0 {
-                format!(", {:.2} s/step", seconds_total / steps_run as f64)
+                let n = steps_run as f64;
+                format!(
+                    ", {:.2} s/step (G {:.2}, D {:.2}, crops {:.2}, R1 {:.2}, EMA {:.2})",
+                    seconds_total / n,
+                    phases[0] / n,
+                    phases[1] / n,
+                    phases[2] / n,
+                    phases[3] / n,
+                    phases[4] / n
+                )
             } else {
                 String::new()
             }

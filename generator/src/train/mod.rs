@@ -31,4 +31,4 @@ pub mod trainer;
 pub use adam::{Adam, AdamConfig};
 pub use config::TrainConfig;
 pub use data::{DatasetSource, RealBatch, TrainingData};
-pub use trainer::{StepStats, Trainer, enable_second_order_gradients};
+pub use trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};

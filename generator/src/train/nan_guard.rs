@@ -62,8 +62,9 @@ impl NanGuard {
         false
     }
 
-    /// Closes step `step`: returns the skip messages of the step, or an error once `limit`
-    /// consecutive steps had a skip.
+    /// Closes step number `step` (1-based, as in `log.csv`: the steps done once it ends):
+    /// returns the skip messages of the step, or an error once `limit` consecutive steps had
+    /// a skip.
     pub fn end_step(&mut self, step: u64) -> Result<Vec<String>> {
         let skipped = std::mem::take(&mut self.skipped_this_step);
         if skipped.is_empty() {

@@ -27,6 +27,7 @@
 //! the variable.
 
 use std::path::Path;
+use std::time::Instant;
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use candle_nn::VarMap;
@@ -58,7 +59,8 @@ pub fn enable_second_order_gradients() {
 /// What one step measured.
 #[derive(Debug, Clone, PartialEq)]
 pub struct StepStats {
-    /// Index of the step (0-based; steps done before it).
+    /// Index of the step (0-based: steps done before it; `log.csv` and messages number it
+    /// `step + 1`).
     pub step: u64,
     /// G's loss.
     pub loss_g: f64,
@@ -72,6 +74,23 @@ pub struct StepStats {
     pub r1: Option<f64>,
     /// Phases skipped because of non-finite values, e.g. `D loss is NaN`.
     pub skipped: Vec<String>,
+    /// Wall-clock seconds per phase.
+    pub seconds: PhaseSeconds,
+}
+
+/// Wall-clock seconds of a step's phases (where a step's time goes).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PhaseSeconds {
+    /// G step: generation, D forward, backward, Adam.
+    pub g: f64,
+    /// D step without the real crops' loading: generation, D forward on both, backward, Adam.
+    pub d: f64,
+    /// Loading the real crops.
+    pub data: f64,
+    /// R1 step (0 on other steps).
+    pub r1: f64,
+    /// EMA update.
+    pub ema: f64,
 }
 
 /// Which phase's random streams a generation uses.
@@ -295,6 +314,14 @@ impl Trainer {
         let step = self.step;
         let (seed, b) = (self.config.seed, self.config.batch);
 
+        let mut seconds = PhaseSeconds::default();
+        let mut clock = Instant::now();
+        let mut lap = || {
+            let t = clock.elapsed().as_secs_f64();
+            clock = Instant::now();
+            t
+        };
+
         // 1. G and M.
         let fakes = self.generate(Phase::G, step, data)?;
         let logits = self.d.forward(&fakes.images, &fakes.omega)?;
@@ -307,10 +334,12 @@ impl Trainer {
             self.model.generator().mapping().update_w_avg(&fakes.w)?;
         }
         drop(grads);
+        seconds.g = lap();
 
         // 2. D on fakes and reals.
-        let fakes = self.generate(Phase::D, step, data)?;
         let reals = data.reals(b, stream_seed(seed, step, Stream::Crops, 0), &self.device)?;
+        seconds.data = lap();
+        let fakes = self.generate(Phase::D, step, data)?;
         let fake_logits = self.d.forward(&fakes.images.detach(), &fakes.omega)?;
         let real_logits = self.d.forward(&reals.images, &reals.omega)?;
         let loss = discriminator_loss(&real_logits, &fake_logits)?;
@@ -321,6 +350,7 @@ impl Trainer {
             self.opt_d.step(&grads)?;
         }
         drop(grads);
+        seconds.d = lap();
 
         // 3. Lazy R1 on the same reals.
         let r1 = if step % self.config.r1_interval as u64 == 0 && self.config.r1_gamma > 0.0 {
@@ -336,6 +366,7 @@ impl Trainer {
         } else {
             None
         };
+        seconds.r1 = lap();
 
         // 4. G_ema.
         let beta = ema_beta(
@@ -345,8 +376,9 @@ impl Trainer {
             self.images_seen(),
         );
         self.ema.update(beta)?;
+        seconds.ema = lap();
 
-        let skipped = self.guard.end_step(step)?;
+        let skipped = self.guard.end_step(step + 1)?;
         self.step += 1;
         Ok(StepStats {
             step,
@@ -356,6 +388,7 @@ impl Trainer {
             fake_logit: scalar(&fake_logits.mean_all()?)?,
             r1,
             skipped,
+            seconds,
         })
     }
 }
