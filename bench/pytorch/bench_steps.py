@@ -37,6 +37,10 @@ CASES = {
     "conv3x3": "3x3 conv 64->64, stride 1, zero padding 1, at 2R x 2R: fwd + bwd",
     "conv4x4s2": "4x4 conv 64->64, stride 2, zero padding 1, at 2R x 2R: fwd + bwd",
     "conv1x1": "1x1 conv 64->64 at 2R x 2R: forward + backward",
+    "modconv": "G's modulated 3x3 conv 64->64 with demodulation at R x R: fwd + bwd",
+    "fir_up": "G's [1,3,3,1] FIR x2 upsampling of 64 channels, R -> 2R: fwd + bwd",
+    "bias_lrelu": "bias + LeakyReLU(0.2) * sqrt(2) on 64 channels at 2R x 2R: fwd + bwd",
+    "bilinear_up": "E's periodic bilinear x2 upsampling of 64 channels, R -> 2R: fwd + bwd",
     "sgemm": "one 1024x1024 by 1024x1024 f32 matrix product (the GEMM ceiling)",
 }
 DEFAULT_CASES = list(CASES)
@@ -121,6 +125,20 @@ class Bench:
             "e": models.count_parameters(self.e),
         }
 
+    def gradient_step(self, shape, f, params):
+        """Forward + backward of sum(f(x) * g) w.r.t. x and `params` (tensors or modules)."""
+        x = torch.randn(shape, generator=self.gen).requires_grad_(True)
+        with torch.no_grad():
+            g = torch.randn(f(x).shape, generator=self.gen)
+
+        def step():
+            x.grad = None
+            for p in params:
+                for t in (p.parameters() if isinstance(p, torch.nn.Module) else [p]):
+                    t.grad = None
+            (f(x) * g).sum().backward()
+        return step
+
     @staticmethod
     def _clear(*modules):
         for mod in modules:
@@ -184,20 +202,31 @@ class Bench:
                 self._clear(self.m)
                 (self.m.forward_rows(rows) * g_out).sum().backward()
             return step, None
+        c = MICRO_CHANNELS
         if name in ("conv3x3", "conv4x4s2", "conv1x1"):
             k, stride, pad = {"conv3x3": (3, 1, 1), "conv4x4s2": (4, 2, 1),
                               "conv1x1": (1, 1, 0)}[name]
-            c, side = MICRO_CHANNELS, 2 * r
-            x = torch.randn(b, c, side, side, generator=self.gen).requires_grad_(True)
             w = torch.randn(c, c, k, k, generator=self.gen).requires_grad_(True)
-            y = F.conv2d(x.detach(), w.detach(), stride=stride, padding=pad)
-            g_out = torch.randn(y.shape, generator=self.gen)
-            ho, wo = y.shape[2], y.shape[3]
-
-            def step():
-                x.grad = w.grad = None
-                (F.conv2d(x, w, stride=stride, padding=pad) * g_out).sum().backward()
-            return step, 3 * conv_flops(b, c, c, ho, wo, k)
+            side = 2 * r
+            out = (side + 2 * pad - k) // stride + 1
+            step = self.gradient_step(
+                (b, c, side, side), lambda x: F.conv2d(x, w, stride=stride, padding=pad), [w])
+            return step, 3 * conv_flops(b, c, c, out, out, k)
+        if name == "modconv":
+            layer = models.ModulatedConv2d(c, c, 3, 512, True)
+            w = torch.randn(b, 512, generator=self.gen)
+            step = self.gradient_step((b, c, r, r), lambda x: layer(x, w), [layer])
+            return step, 3 * conv_flops(b, c, c, r, r, 3)
+        if name == "fir_up":
+            return self.gradient_step((b, c, r, r), models.upsample2d, []), None
+        if name == "bias_lrelu":
+            bias = torch.randn(c, generator=self.gen).requires_grad_(True)
+            step = self.gradient_step(
+                (b, c, 2 * r, 2 * r), lambda x: models.lrelu(x + bias[None, :, None, None]),
+                [bias])
+            return step, None
+        if name == "bilinear_up":
+            return self.gradient_step((b, c, r, r), models.upsample2x_periodic, []), None
         if name == "sgemm":
             m1 = torch.randn(1024, 1024, generator=self.gen)
             m2 = torch.randn(1024, 1024, generator=self.gen)
@@ -244,7 +273,7 @@ def main(argv=None):
         if not a.json:
             c = report["cases"][-1]
             gf = f"  {flops / c['median_s'] / 1e9:7.1f} GFLOP/s" if flops else ""
-            print(f"{name:<10} median {c['median_s']:.4f} s  min {c['min_s']:.4f} s{gf}",
+            print(f"{name:<12} median {c['median_s']:.4f} s  min {c['min_s']:.4f} s{gf}",
                   flush=True)
     if a.json:
         json.dump(report, sys.stdout, indent=1)

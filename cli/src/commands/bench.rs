@@ -14,6 +14,9 @@
 //! | `sample` | one material (batch 1): G forward, M relight, E maps, analytic render |
 //! | `mlp` | M alone on B·R² texel rows, forward + backward |
 //! | `conv3x3`, `conv4x4s2`, `conv1x1` | one 64→64 conv at 2R × 2R (128² at R = 64), fwd + bwd |
+//! | `modconv` | G's modulated, demodulated 3×3 conv 64→64 at R × R, fwd + bwd |
+//! | `fir_up`, `bilinear_up` | G's FIR ×2 and E's periodic bilinear ×2 upsampling, 64 channels at R × R, fwd + bwd |
+//! | `bias_lrelu` | bias + `lrelu` on 64 channels at 2R × 2R, fwd + bwd |
 //! | `sgemm` | one 1024² × 1024² f32 matmul: the GEMM ceiling of this machine |
 //!
 //! Every backward is taken of a scalar and produces the gradients of every parameter in the
@@ -36,7 +39,11 @@ use candle_nn::VarMap;
 use indicatif::{ProgressBar, ProgressStyle};
 use photomat_core::render::to_network_range;
 use photomat_core::{Brdf, FlashGeometry, Highlight, encode_display, lookup, render_radiance_with};
-use photomat_estimator::{EstimatorConfig, EstimatorModel};
+use photomat_estimator::{EstimatorConfig, EstimatorModel, upsample2x_periodic};
+use photomat_generator::activation::bias_lrelu;
+use photomat_generator::fir::upsample2d;
+use photomat_generator::modulated_conv::modulated_conv2d;
+use photomat_generator::padding::Padding;
 use photomat_generator::train::config::default_r1_gamma;
 use photomat_generator::train::enable_second_order_gradients;
 use photomat_generator::train::loss::{discriminator_loss, generator_loss, r1_loss};
@@ -79,13 +86,21 @@ pub enum Case {
     Conv4x4s2,
     #[value(name = "conv1x1")]
     Conv1x1,
+    #[value(name = "modconv")]
+    ModConv,
+    #[value(name = "fir_up")]
+    FirUp,
+    #[value(name = "bias_lrelu")]
+    BiasLrelu,
+    #[value(name = "bilinear_up")]
+    BilinearUp,
     #[value(name = "sgemm")]
     Sgemm,
 }
 
 impl Case {
     /// Every case, in report order.
-    pub const ALL: [Case; 10] = [
+    pub const ALL: [Case; 14] = [
         Case::GStep,
         Case::DStep,
         Case::DR1,
@@ -95,6 +110,10 @@ impl Case {
         Case::Conv3x3,
         Case::Conv4x4s2,
         Case::Conv1x1,
+        Case::ModConv,
+        Case::FirUp,
+        Case::BiasLrelu,
+        Case::BilinearUp,
         Case::Sgemm,
     ];
 
@@ -110,6 +129,10 @@ impl Case {
             Case::Conv3x3 => "conv3x3",
             Case::Conv4x4s2 => "conv4x4s2",
             Case::Conv1x1 => "conv1x1",
+            Case::ModConv => "modconv",
+            Case::FirUp => "fir_up",
+            Case::BiasLrelu => "bias_lrelu",
+            Case::BilinearUp => "bilinear_up",
             Case::Sgemm => "sgemm",
         }
     }
@@ -134,6 +157,14 @@ impl Case {
             Case::Conv3x3 => "3x3 conv 64->64, stride 1, zero padding 1, at 2R x 2R: fwd + bwd",
             Case::Conv4x4s2 => "4x4 conv 64->64, stride 2, zero padding 1, at 2R x 2R: fwd + bwd",
             Case::Conv1x1 => "1x1 conv 64->64 at 2R x 2R: forward + backward",
+            Case::ModConv => "G's modulated 3x3 conv 64->64 with demodulation at R x R: fwd + bwd",
+            Case::FirUp => "G's [1,3,3,1] FIR x2 upsampling of 64 channels, R -> 2R: fwd + bwd",
+            Case::BiasLrelu => {
+                "bias + LeakyReLU(0.2) * sqrt(2) on 64 channels at 2R x 2R: fwd + bwd"
+            }
+            Case::BilinearUp => {
+                "E's periodic bilinear x2 upsampling of 64 channels, R -> 2R: fwd + bwd"
+            }
             Case::Sgemm => "one 1024x1024 by 1024x1024 f32 matrix product (the GEMM ceiling)",
         }
     }
@@ -340,6 +371,7 @@ fn step<'a>(
     let g = s.gan.generator();
     let m = s.gan.relight();
     let omega = &s.lights.omega;
+    let dev = Device::Cpu;
     Ok(match case {
         Case::GStep => (
             Box::new(move || {
@@ -402,7 +434,7 @@ fn step<'a>(
                 .permute((0, 2, 3, 1))?
                 .contiguous()?
                 .reshape((b * r * r, ()))?;
-            let weights = pseudo_random((b * r * r, 3), args.seed ^ 3, DType::F32, &Device::Cpu)?;
+            let weights = pseudo_random((b * r * r, 3), args.seed ^ 3, DType::F32, &dev)?;
             (
                 Box::new(move || {
                     let y = m.forward_rows(&rows)?;
@@ -415,14 +447,7 @@ fn step<'a>(
         }
         Case::Conv3x3 | Case::Conv4x4s2 | Case::Conv1x1 => {
             let (k, stride, padding) = case.conv_shape().expect("a conv case");
-            let (c, side) = (MICRO_CHANNELS, 2 * r);
-            let dev = Device::Cpu;
-            let x = Var::from_tensor(&pseudo_random(
-                (b, c, side, side),
-                args.seed ^ 4,
-                DType::F32,
-                &dev,
-            )?)?;
+            let c = MICRO_CHANNELS;
             let w = Var::from_tensor(&pseudo_random(
                 (c, c, k, k),
                 args.seed ^ 5,
@@ -430,22 +455,56 @@ fn step<'a>(
                 &dev,
             )?)?;
             let spec = Conv2dSpec::zeros(stride, padding);
-            let y = conv2d(&x.as_tensor().detach(), &w.as_tensor().detach(), spec)?;
-            let (_, _, ho, wo) = y.dims4()?;
-            let weights = pseudo_random(y.shape(), args.seed ^ 6, DType::F32, &dev)?;
-            let flops = 3.0 * 2.0 * (b * c * ho * wo * c * k * k) as f64;
+            let side = 2 * r;
+            let out = (side + 2 * padding - k) / stride + 1;
+            let flops = 3.0 * conv_flops(b, c, out, k);
+            let conv = move |x: &Tensor| conv2d(x, w.as_tensor(), spec);
             (
-                Box::new(move || {
-                    let y = conv2d(x.as_tensor(), w.as_tensor(), spec)?;
-                    drop((y * &weights)?.sum_all()?.backward()?);
-                    Ok(())
-                }),
+                gradient_step((b, c, side, side), args.seed, conv)?,
                 b,
                 Some(flops),
             )
         }
+        Case::ModConv => {
+            let c = MICRO_CHANNELS;
+            let latent = GeneratorConfig::default().latent_dim;
+            let vars = VarMap::new();
+            let vb = seeded_var_builder(&vars, args.seed ^ 5, DType::F32, &dev);
+            let layer = modulated_conv2d(c, c, 3, latent, true, Padding::Zeros, vb)?;
+            let w = pseudo_random((b, latent), args.seed ^ 9, DType::F32, &dev)?;
+            let conv = move |x: &Tensor| layer.forward(x, &w);
+            let flops = 3.0 * conv_flops(b, c, r, 3);
+            (
+                gradient_step((b, c, r, r), args.seed, conv)?,
+                b,
+                Some(flops),
+            )
+        }
+        Case::FirUp => {
+            let up = |x: &Tensor| upsample2d(x, Padding::Zeros);
+            (
+                gradient_step((b, MICRO_CHANNELS, r, r), args.seed, up)?,
+                b,
+                None,
+            )
+        }
+        Case::BiasLrelu => {
+            let bias = Var::from_tensor(&pseudo_random(
+                MICRO_CHANNELS,
+                args.seed ^ 9,
+                DType::F32,
+                &dev,
+            )?)?;
+            let act = move |x: &Tensor| bias_lrelu(x, bias.as_tensor());
+            let shape = (b, MICRO_CHANNELS, 2 * r, 2 * r);
+            (gradient_step(shape, args.seed, act)?, b, None)
+        }
+        Case::BilinearUp => (
+            gradient_step((b, MICRO_CHANNELS, r, r), args.seed, upsample2x_periodic)?,
+            b,
+            None,
+        ),
         Case::Sgemm => {
-            let dev = Device::Cpu;
             let n = SGEMM_SIDE;
             let a = pseudo_random((n, n), args.seed ^ 7, DType::F32, &dev)?;
             let bm = pseudo_random((n, n), args.seed ^ 8, DType::F32, &dev)?;
@@ -459,6 +518,29 @@ fn step<'a>(
             )
         }
     })
+}
+
+/// FLOPs of one pass of a stride-aware k×k conv with `c` channels in and out and an
+/// `out` × `out` output: `2·B·C_out·H_out·W_out·C_in·k²`.
+fn conv_flops(b: usize, c: usize, out: usize, k: usize) -> f64 {
+    2.0 * (b * c * out * out * c * k * k) as f64
+}
+
+/// Forward + backward of `Σ f(x) ⊙ g` with respect to a seeded input `x` of `shape` (and every
+/// parameter `f` holds), `g` a seeded tensor of f's output shape: the per-op cases.
+fn gradient_step<'a>(
+    shape: (usize, usize, usize, usize),
+    seed: u64,
+    f: impl Fn(&Tensor) -> candle_core::Result<Tensor> + 'a,
+) -> anyhow::Result<Step<'a>> {
+    let dev = Device::Cpu;
+    let x = Var::from_tensor(&pseudo_random(shape, seed ^ 4, DType::F32, &dev)?)?;
+    let y = f(&x.as_tensor().detach())?;
+    let g = pseudo_random(y.shape(), seed ^ 6, DType::F32, &dev)?;
+    Ok(Box::new(move || {
+        drop((f(x.as_tensor())? * &g)?.sum_all()?.backward()?);
+        Ok(())
+    }))
 }
 
 fn validate(args: &Args) -> anyhow::Result<()> {
@@ -564,7 +646,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             .unwrap_or_default();
         writeln!(
             out,
-            "{:<10} median {:.4} s  min {:.4} s{rate}",
+            "{:<12} median {:.4} s  min {:.4} s{rate}",
             c.name, c.median_s, c.min_s
         )?;
     }
