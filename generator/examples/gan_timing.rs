@@ -12,6 +12,9 @@
 //! both see the same machine load; the medians and their ratio are printed. `--baseline` or
 //! `--fast` times one implementation only.
 //!
+//! The process runs with the system allocator (the `photomat` CLI uses mimalloc, which
+//! takes the page faults out of both paths' element-wise passes).
+//!
 //! Cases (f32, z ~ N(0, I), random noise, per-texel ω ~ N(0, 1)):
 //! - `G+M fwd`: z → F → RGB, and `G+M bwd`: the backward pass of mean(RGB);
 //! - `D fwd+bwd`: logits of real-like images, backward of their mean to D's parameters;

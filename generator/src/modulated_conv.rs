@@ -14,10 +14,13 @@
 //! Implemented without per-sample (grouped) weights, StyleGAN2's non-fused path:
 //! `y = d ⊙ conv(x ⊙ s, W)`, the same value since modulation is a per-input-channel scale. The
 //! demodulation coefficients are one matmul, `d = rsqrt((s ⊙ s) · (Σ_k W²)ᵀ + ε)`. With a
-//! weight shared by the batch, the convolution is photomat-kernels' im2col + gemm
-//! [`conv2d`](photomat_kernels::conv2d) with the padding (zeros or circular) done inside the
-//! op, one gemm per band of output rows whose backward is the same gemm transposed; candle's
-//! `conv2d` (inside [`photomat_kernels::with_reference_ops`]) computes the same values.
+//! weight shared by the batch, modulation, convolution and demodulation are one op,
+//! photomat-kernels' [`modulated_conv2d`](photomat_kernels::modulated_conv2d): the styles
+//! scale the input once, im2col + gemm convolves it with the padding (zeros or circular) done
+//! inside the op, the coefficients scale the output rows, and the backward takes seven passes
+//! over the map where candle's broadcast products took about seventeen. Inside
+//! [`photomat_kernels::with_reference_ops`] the plain-candle formulation (broadcast products,
+//! explicit padding, candle's `conv2d`) computes the same values.
 //!
 //! ε = 1e-8 as in StyleGAN2 (eq. 3): it only matters when a sample's styles of a layer are all
 //! ≈ 0, where it keeps `d` finite (≤ 10⁴) instead of dividing by zero; with unit-variance
@@ -125,25 +128,30 @@ impl ModulatedConv2d {
             bail!("modulated conv: {bw} styles for a batch of {b}");
         }
         let styles = self.styles(w)?;
-        let x = x.broadcast_mul(&styles.reshape((b, c_in, 1, 1))?)?;
         let k = self.weight.dims()[2];
-        let y = if photomat_kernels::reference_ops() {
-            // The plain-candle formulation (explicit padding, candle's conv2d).
-            pad2d(&x, k / 2, self.padding)?.conv2d(&self.weight, 0, 1, 1, 1)?
-        } else {
-            let spec = photomat_kernels::Conv2dSpec {
-                stride: 1,
-                padding: k / 2,
-                mode: self.padding.into(),
+        if photomat_kernels::reference_ops() {
+            // The plain-candle formulation: broadcast products, explicit padding, candle's
+            // conv2d.
+            let x = x.broadcast_mul(&styles.reshape((b, c_in, 1, 1))?)?;
+            let y = pad2d(&x, k / 2, self.padding)?.conv2d(&self.weight, 0, 1, 1, 1)?;
+            return if self.demodulate {
+                let d = self.demodulation(&styles)?;
+                y.broadcast_mul(&d.reshape((b, (), 1, 1))?)
+            } else {
+                Ok(y)
             };
-            photomat_kernels::conv2d(&x, &self.weight, spec)?
-        };
-        if self.demodulate {
-            let d = self.demodulation(&styles)?;
-            y.broadcast_mul(&d.reshape((b, (), 1, 1))?)
-        } else {
-            Ok(y)
         }
+        let scales = if self.demodulate {
+            Tensor::cat(&[&styles, &self.demodulation(&styles)?], 1)?
+        } else {
+            styles
+        };
+        let spec = photomat_kernels::Conv2dSpec {
+            stride: 1,
+            padding: k / 2,
+            mode: self.padding.into(),
+        };
+        photomat_kernels::modulated_conv2d(x, &self.weight, &scales, self.demodulate, spec)
     }
 }
 
