@@ -121,6 +121,10 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
     ] {
         assert!(whole.join(f).is_file(), "{f} missing");
     }
+    // Five materials × (four lights + one real crop) of 32², 4-pixel gaps.
+    let (c, h, w) =
+        photomat_core::image_io::png_header(&whole.join("samples/step-000003.png")).unwrap();
+    assert_eq!((c, h, w), (3, 5 * 32 + 16, 5 * 32 + 16));
     let log = std::fs::read_to_string(whole.join("log.csv")).unwrap();
     let rows: Vec<&str> = log.lines().collect();
     assert_eq!(rows.len(), 4, "{log}");
