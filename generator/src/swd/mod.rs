@@ -23,7 +23,8 @@
 //!    distance taken; the mean over directions and repeats, ×10³, is the level's value. The
 //!    report's `mean` is the mean over levels (the reference's `SWDx1e3_avg`).
 //!
-//! Two deliberate differences from the reference, neither of which changes what is measured:
+//! Two deliberate differences from the reference, neither of which changes the quantity
+//! estimated:
 //! - The sets may differ in size: the 1-D distance is the exact W1 between the two empirical
 //!   distributions ([`wasserstein_1d`]), which for equal sizes is the reference's mean of
 //!   |sorted a − sorted b|.
@@ -32,12 +33,15 @@
 //!   sets (the reference draws them per image). Each set still yields N·128 descriptors per
 //!   level, covering 128 positions instead of up to N·128; in exchange real and fake are
 //!   compared position by position (flash photos are not stationary: the highlight sits near
-//!   the centre), the result is deterministic per seed, exactly independent of the order of
-//!   the images, exactly 0 for identical sets, and exactly blind to a global shift or
-//!   contrast change of one set (the normalisation's intent).
+//!   the centre), the result is deterministic per seed, exactly 0 for identical sets, and
+//!   independent of the order of the images and blind to a global shift or contrast change
+//!   of one set (the normalisation's intent) up to float rounding in the normalisation.
 //!
 //! Plain Rust on f32 slices, no gradients; images run in parallel (rayon) and projections are
-//! candle matrix products. [`model`] applies the metric to a GAN model and a data set.
+//! candle matrix products; the projections are sorted by a radix sort ([`radix_sort`]). On
+//! 256 images of 64² per set this runs 1.5–1.7× faster than the reference NumPy/SciPy code
+//! on sets of the same size, on the same (loaded, 2-core) machine (`examples/swd_timing.rs`).
+//! [`model`] applies the metric to a GAN model and a data set.
 
 use candle_core::{DType, Device, Result, Tensor, bail};
 use photomat_kernels::SplitMix64;
