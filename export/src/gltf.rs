@@ -5,7 +5,7 @@
 //! [`write_gltf`] writes `<stem>.gltf` (JSON) and `<stem>.bin` (the quad's vertex data) next to
 //! the texture set's PNGs. The document is built from serde structs, never pasted text:
 //! - **mesh**: the unit square of DESIGN §2 in the XY plane facing +Z (4 vertices: POSITION,
-//!   NORMAL = +Z, TANGENT = (+X, w = 1), TEXCOORD_0 with (0, 0) at the top-left corner as glTF
+//!   NORMAL = +Z, TANGENT = (+X, w = 1; only with a normal texture), TEXCOORD_0 with (0, 0) at the top-left corner as glTF
 //!   and our image rows agree; 2 triangles, counter-clockwise seen from +Z). With
 //!   bitangent = N × T · w = +Y, tangent space is the plane frame, so our normal maps (+y up)
 //!   are glTF normal textures unchanged.
@@ -191,75 +191,90 @@ const QUAD: [([f32; 3], [f32; 2]); 4] = [
 /// Two counter-clockwise triangles seen from +Z.
 const QUAD_INDICES: [u16; 6] = [0, 3, 2, 0, 2, 1];
 
-/// The quad's binary buffer (POSITION, NORMAL, TANGENT, TEXCOORD_0, then the u16 indices) and
-/// its accessors/buffer views, in that order.
-fn quad_buffer() -> (Vec<u8>, Vec<Accessor>, Vec<BufferView>) {
+/// The quad's binary buffer (POSITION, NORMAL, TEXCOORD_0, TANGENT when `tangents` (only a
+/// normal texture uses them), then the u16 indices), one tightly packed buffer view per
+/// accessor (glTF requires a `byteStride` when vertex accessors share a view), and the
+/// accessors, in that order.
+fn quad_buffer(tangents: bool) -> (Vec<u8>, Vec<Accessor>, Vec<BufferView>) {
     let mut bytes = Vec::new();
-    let mut floats = |values: &mut dyn Iterator<Item = f32>| {
+    let mut views = Vec::new();
+    let mut accessors = Vec::new();
+    let mut attribute = |values: Vec<f32>, kind: &str, bounds: Option<(Vec<f32>, Vec<f32>)>| {
         let start = bytes.len();
-        for v in values {
+        for v in &values {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
-        start
+        views.push(BufferView {
+            buffer: 0,
+            byte_offset: start,
+            byte_length: bytes.len() - start,
+            target: ARRAY_BUFFER,
+        });
+        let (min, max) = bounds.unzip();
+        accessors.push(Accessor {
+            buffer_view: views.len() - 1,
+            byte_offset: 0,
+            component_type: FLOAT,
+            count: QUAD.len(),
+            kind: kind.to_string(),
+            min,
+            max,
+        });
     };
-    let pos = floats(&mut QUAD.iter().flat_map(|(p, _)| *p));
-    let nrm = floats(&mut QUAD.iter().flat_map(|_| [0.0, 0.0, 1.0]));
-    let tan = floats(&mut QUAD.iter().flat_map(|_| [1.0, 0.0, 0.0, 1.0]));
-    let uv = floats(&mut QUAD.iter().flat_map(|(_, t)| *t));
-    let vertex_end = bytes.len();
-    let idx = bytes.len();
+    let bounds = (vec![-0.5, -0.5, 0.0], vec![0.5, 0.5, 0.0]);
+    attribute(
+        QUAD.iter().flat_map(|(p, _)| *p).collect(),
+        "VEC3",
+        Some(bounds),
+    );
+    attribute(
+        QUAD.iter().flat_map(|_| [0.0, 0.0, 1.0]).collect(),
+        "VEC3",
+        None,
+    );
+    attribute(QUAD.iter().flat_map(|(_, t)| *t).collect(), "VEC2", None);
+    if tangents {
+        attribute(
+            QUAD.iter().flat_map(|_| [1.0, 0.0, 0.0, 1.0]).collect(),
+            "VEC4",
+            None,
+        );
+    }
+    let start = bytes.len();
     for i in QUAD_INDICES {
         bytes.extend_from_slice(&i.to_le_bytes());
     }
-    let views = vec![
-        BufferView {
-            buffer: 0,
-            byte_offset: 0,
-            byte_length: vertex_end,
-            target: ARRAY_BUFFER,
-        },
-        BufferView {
-            buffer: 0,
-            byte_offset: idx,
-            byte_length: bytes.len() - idx,
-            target: ELEMENT_ARRAY_BUFFER,
-        },
-    ];
-    let accessor = |offset, kind: &str, count| Accessor {
-        buffer_view: 0,
-        byte_offset: offset,
-        component_type: FLOAT,
-        count,
-        kind: kind.to_string(),
+    views.push(BufferView {
+        buffer: 0,
+        byte_offset: start,
+        byte_length: bytes.len() - start,
+        target: ELEMENT_ARRAY_BUFFER,
+    });
+    accessors.push(Accessor {
+        buffer_view: views.len() - 1,
+        byte_offset: 0,
+        component_type: UNSIGNED_SHORT,
+        count: QUAD_INDICES.len(),
+        kind: "SCALAR".to_string(),
         min: None,
         max: None,
-    };
-    let accessors = vec![
-        Accessor {
-            min: Some(vec![-0.5, -0.5, 0.0]),
-            max: Some(vec![0.5, 0.5, 0.0]),
-            ..accessor(pos, "VEC3", 4)
-        },
-        accessor(nrm, "VEC3", 4),
-        accessor(tan, "VEC4", 4),
-        accessor(uv, "VEC2", 4),
-        Accessor {
-            buffer_view: 1,
-            byte_offset: 0,
-            component_type: UNSIGNED_SHORT,
-            count: QUAD_INDICES.len(),
-            kind: "SCALAR".to_string(),
-            min: None,
-            max: None,
-        },
-    ];
+    });
     (bytes, accessors, views)
 }
 
 /// The glTF document for `textures` whose buffer is the file `bin_uri`; `name` names the
 /// material, mesh and node.
 pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
-    let (bytes, accessors, buffer_views) = quad_buffer();
+    let (bytes, accessors, buffer_views) = quad_buffer(textures.normal.is_some());
+    let mut attributes = BTreeMap::from([
+        ("POSITION".to_string(), 0),
+        ("NORMAL".to_string(), 1),
+        ("TEXCOORD_0".to_string(), 2),
+    ]);
+    if textures.normal.is_some() {
+        attributes.insert("TANGENT".to_string(), 3);
+    }
+    let indices = accessors.len() - 1;
     let mut images = Vec::new();
     let mut texture = |file: &Option<String>| {
         file.as_ref().map(|uri| {
@@ -342,13 +357,8 @@ pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
         meshes: vec![Mesh {
             name: name.to_string(),
             primitives: vec![Primitive {
-                attributes: BTreeMap::from([
-                    ("POSITION".to_string(), 0),
-                    ("NORMAL".to_string(), 1),
-                    ("TANGENT".to_string(), 2),
-                    ("TEXCOORD_0".to_string(), 3),
-                ]),
-                indices: 4,
+                attributes,
+                indices,
                 material: 0,
                 mode: TRIANGLES,
             }],
@@ -380,7 +390,7 @@ pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
 pub fn write_gltf(dir: &Path, stem: &str, textures: &TextureSet) -> Result<std::path::PathBuf> {
     let bin_name = format!("{stem}.bin");
     let document = gltf_document(textures, stem, &bin_name);
-    let (bytes, _, _) = quad_buffer();
+    let (bytes, _, _) = quad_buffer(textures.normal.is_some());
     write_atomic(&dir.join(&bin_name), &bytes)?;
     let path = dir.join(format!("{stem}.gltf"));
     let mut text = serde_json::to_string_pretty(&document)

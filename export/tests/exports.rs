@@ -75,9 +75,15 @@ fn check_gltf(path: &Path) -> Value {
     }
     for mesh in doc["meshes"].as_array().unwrap() {
         for p in mesh["primitives"].as_array().unwrap() {
-            for key in ["POSITION", "NORMAL", "TANGENT", "TEXCOORD_0"] {
+            for key in ["POSITION", "NORMAL", "TEXCOORD_0"] {
                 assert!(idx(&p["attributes"][key]) < len("accessors"), "{key}");
             }
+            // Tangents exactly when a normal texture needs them.
+            let material = &doc["materials"][idx(&p["material"])];
+            assert_eq!(
+                p["attributes"].get("TANGENT").is_some(),
+                material.get("normalTexture").is_some()
+            );
             assert!(idx(&p["indices"]) < len("accessors"));
             assert!(idx(&p["material"]) < len("materials"));
         }
@@ -126,6 +132,17 @@ fn check_gltf(path: &Path) -> Value {
         let b = idx(&v["buffer"]);
         assert!(b < buffers.len());
         assert!(idx(&v["byteOffset"]) + idx(&v["byteLength"]) <= buffers[b].len());
+    }
+    // Vertex accessors sharing a view need the view's byteStride (glTF 2.0 §3.6.2.4).
+    let mut users = vec![0; len("bufferViews")];
+    for a in doc["accessors"].as_array().unwrap() {
+        users[idx(&a["bufferView"])] += 1;
+    }
+    for (v, n) in doc["bufferViews"].as_array().unwrap().iter().zip(users) {
+        assert!(
+            n <= 1 || v.get("byteStride").is_some(),
+            "shared view without byteStride"
+        );
     }
     for a in doc["accessors"].as_array().unwrap() {
         let view = &doc["bufferViews"][idx(&a["bufferView"])];
@@ -214,14 +231,20 @@ fn gltf_quad_faces_its_normal_with_tangent_along_u() {
     let dir = tempfile::tempdir().unwrap();
     let set = write_textures(dir.path(), brdf.as_ref(), &maps).unwrap();
     let doc = check_gltf(&write_gltf(dir.path(), "q", &set).unwrap());
-    let pos = floats(&doc, dir.path(), 0);
-    let uv = floats(&doc, dir.path(), 3);
+    let attribute = |name: &str| {
+        let i = doc["meshes"][0]["primitives"][0]["attributes"][name]
+            .as_u64()
+            .unwrap();
+        floats(&doc, dir.path(), i as usize)
+    };
+    let pos = attribute("POSITION");
+    let uv = attribute("TEXCOORD_0");
     // u grows with x, v grows with −y (image rows go down, +y is up): tangent +x, bitangent +y.
     for k in 0..4 {
         assert_eq!(uv[2 * k], pos[3 * k] + 0.5);
         assert_eq!(uv[2 * k + 1], 0.5 - pos[3 * k + 1]);
     }
-    let tangent = floats(&doc, dir.path(), 2);
+    let tangent = attribute("TANGENT");
     assert_eq!(&tangent[..4], &[1.0, 0.0, 0.0, 1.0]);
 }
 
