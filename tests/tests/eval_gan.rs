@@ -1,7 +1,8 @@
 //! `photomat eval-gan` end to end: an untrained tiny GAN against a tiny simulated data set
 //! gives finite, positive per-level SWD values (table and JSON agree, seeded runs repeat) far
-//! above the metric's real-against-real noise floor, and a missing model folder, a missing data set or a model too large for the data set's
-//! photos are errors that name the paths and sizes.
+//! above the metric's real-against-real noise floor, and a missing model folder, a missing
+//! data set or a model too large for the data set's photos are errors that name the paths
+//! and sizes.
 
 use photomat_tests as _;
 
