@@ -213,7 +213,7 @@ impl CustomOp2 for BiasLeakyRelu {
 }
 
 /// The contiguous slice a layout describes, or an error naming the op.
-fn slice<'a, T>(v: &'a [T], layout: &Layout, op: &str) -> Result<&'a [T]> {
+pub(crate) fn slice<'a, T>(v: &'a [T], layout: &Layout, op: &str) -> Result<&'a [T]> {
     match layout.contiguous_offsets() {
         Some((start, end)) => Ok(&v[start..end]),
         None => bail!("{op}: expected a contiguous tensor"),
@@ -267,13 +267,13 @@ impl CustomOp1 for LeakyRelu {
 
 /// `grad · f'(x)`: (grad, x) → `g·grad` where x > 0, `g·slope·grad` elsewhere.
 #[derive(Clone, Copy)]
-struct LeakyReluGrad {
-    slope: f64,
-    gain: f64,
+pub(crate) struct LeakyReluGrad {
+    pub(crate) slope: f64,
+    pub(crate) gain: f64,
 }
 
 impl LeakyReluGrad {
-    fn apply(self, grad: &Tensor, x: &Tensor) -> Result<Tensor> {
+    pub(crate) fn apply(self, grad: &Tensor, x: &Tensor) -> Result<Tensor> {
         grad.contiguous()?.apply_op2(&x.contiguous()?, self)
     }
 }

@@ -15,6 +15,8 @@
 //!   (StyleGAN2's `upfirdn2d` with the `[1, 3, 3, 1]` filter), differentiable to any order.
 //! - [`modulated_conv2d`]: StyleGAN2's modulated convolution (input styles, shared-weight
 //!   conv, output demodulation) as one op with a seven-pass backward ([`modulated_conv`]).
+//! - [`noise_bias_leaky_relu_gain`]: a synthesis layer's epilogue (noise, bias, LeakyReLU ×
+//!   gain) as one element-wise pass each way ([`noise_act`]).
 //! - [`reference`]: a per-thread switch sending every op to its candle reference composition
 //!   (equivalence tests, same-process baselines).
 //! - [`alloc`]: the global allocator (mimalloc, opt-in feature) and thread count binaries use.
@@ -30,6 +32,7 @@ pub mod conv;
 pub mod conv_grad;
 pub mod fir;
 pub mod modulated_conv;
+pub mod noise_act;
 pub mod reference;
 pub mod splitmix;
 pub mod testing;
@@ -40,5 +43,6 @@ pub use conv::{Conv2dSpec, PaddingMode, conv2d, conv2d_reference};
 pub use conv_grad::conv2d_fast_backward;
 pub use fir::{AxisMatrix, separable, separable_reference};
 pub use modulated_conv::{modulated_conv2d, modulated_conv2d_reference};
+pub use noise_act::noise_bias_leaky_relu_gain;
 pub use reference::{reference_ops, with_reference_ops};
 pub use splitmix::SplitMix64;
