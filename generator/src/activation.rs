@@ -61,6 +61,26 @@ pub fn bias_lrelu(x: &Tensor, bias: &Tensor) -> Result<Tensor> {
     lrelu(&x.broadcast_add(&bias.reshape(shape)?)?)
 }
 
+/// A synthesis layer's epilogue: `√2 · LeakyReLU(x + noise + bias, 0.2)` with one noise image
+/// per sample (already scaled by the layer's strength) broadcast over the channels, one pass
+/// each way on the CPU ([`photomat_kernels::noise_bias_leaky_relu_gain`]); inside
+/// [`photomat_kernels::with_reference_ops`] a `broadcast_add` followed by [`bias_lrelu`].
+///
+/// # Shapes
+/// x (B, C, H, W), noise (B, 1, H, W), bias (C) → (B, C, H, W).
+pub fn noise_bias_lrelu(x: &Tensor, noise: &Tensor, bias: &Tensor) -> Result<Tensor> {
+    if !photomat_kernels::reference_ops() {
+        return photomat_kernels::noise_bias_leaky_relu_gain(
+            x,
+            noise,
+            bias,
+            LRELU_SLOPE,
+            LRELU_GAIN,
+        );
+    }
+    bias_lrelu(&x.broadcast_add(noise)?, bias)
+}
+
 #[cfg(test)]
 mod tests {
     use candle_core::{Device, Var};

@@ -39,19 +39,28 @@ impl NoiseInjection {
     /// # Shapes
     /// x (B, C, H, W), noise (B, 1, H, W) → (B, C, H, W).
     pub fn forward(&self, x: &Tensor, noise: Option<&Tensor>) -> Result<Tensor> {
-        let (b, _c, h, w) = x.dims4()?;
+        let (_b, _c, _h, _w) = x.dims4()?;
         let Some(noise) = noise else {
             return Ok(x.clone());
         };
+        x.broadcast_add(&self.scaled(x, noise)?)
+    }
+
+    /// `strength · noise`, the term [`NoiseInjection::forward`] adds, for fused epilogues
+    /// ([`crate::activation::noise_bias_lrelu`]); `features` gives the expected shape.
+    ///
+    /// # Shapes
+    /// features (B, C, H, W), noise (B, 1, H, W) → (B, 1, H, W).
+    pub fn scaled(&self, features: &Tensor, noise: &Tensor) -> Result<Tensor> {
+        let (b, _c, h, w) = features.dims4()?;
         if noise.dims4()? != (b, 1, h, w) {
             bail!(
                 "noise image of shape {:?} does not fit features {:?} (expected ({b}, 1, {h}, {w}))",
                 noise.dims(),
-                x.dims()
+                features.dims()
             );
         }
-        let scaled = noise.broadcast_mul(&self.strength.reshape((1, 1, 1, 1))?)?;
-        x.broadcast_add(&scaled)
+        noise.broadcast_mul(&self.strength.reshape((1, 1, 1, 1))?)
     }
 
     /// The learned strength, shape (1).

@@ -35,7 +35,7 @@
 use candle_core::{Result, Tensor, bail};
 use candle_nn::{Init, VarBuilder};
 
-use crate::activation::bias_lrelu;
+use crate::activation::{bias_lrelu, noise_bias_lrelu};
 use crate::fir::upsample2d;
 use crate::mapping::Mapping;
 use crate::modulated_conv::{ModulatedConv2d, modulated_conv2d};
@@ -95,8 +95,10 @@ impl SynthesisLayer {
             x.clone()
         };
         let y = self.conv.forward(&x, w)?;
-        let y = self.noise.forward(&y, noise)?;
-        bias_lrelu(&y, &self.bias)
+        match noise {
+            Some(n) => noise_bias_lrelu(&y, &self.noise.scaled(&y, n)?, &self.bias),
+            None => bias_lrelu(&y, &self.bias),
+        }
     }
 }
 
