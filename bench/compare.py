@@ -4,6 +4,10 @@
     python3 bench/compare.py                      # threads 2 and 1, 2 rounds, release build
     python3 bench/compare.py --threads 2 --rounds 3 --iters 5
 
+With `--candle-baseline` each round also runs photomat on its plain-candle reference ops
+(`photomat bench --candle-reference`), and the table adds that time and the kernels'
+speed-up (candle / photomat).
+
 For every thread count and configuration (`--configs`, default: all cases at 64², sampling
 and the E step at 256²) it runs the two implementations alternately, round after round
 (photomat, PyTorch, photomat, PyTorch, ...), so that load from other jobs on the machine hits
@@ -53,6 +57,8 @@ def parse_args():
                         f"(default {DEFAULT_CONFIGS!r})")
     p.add_argument("--omp-wait-policy", default="PASSIVE", choices=["PASSIVE", "ACTIVE"],
                    help="OMP_WAIT_POLICY of the PyTorch side (default PASSIVE: see the docs)")
+    p.add_argument("--candle-baseline", action="store_true",
+                   help="also run photomat on plain candle (photomat bench --candle-reference)")
     p.add_argument("--skip-build", action="store_true",
                    help="use the existing target/release/photomat")
     p.add_argument("--out", default=os.path.join(ROOT, "target", "bench"),
@@ -79,8 +85,8 @@ def run_side(side, threads, size, cases, a, photomat):
     if cases:
         common += ["--cases", cases]
     env = dict(os.environ)
-    if side == "photomat":
-        cmd = [photomat, "bench"] + common
+    if side in ("photomat", "candle"):
+        cmd = [photomat, "bench"] + common + (["--candle-reference"] if side == "candle" else [])
         env["RAYON_NUM_THREADS"] = str(threads)
     else:
         cmd = [VENV_PYTHON, SCRIPT, "--threads", str(threads)] + common
@@ -101,9 +107,10 @@ def run_side(side, threads, size, cases, a, photomat):
 
 
 def check_parameters(reports):
-    ours, theirs = reports["photomat"][0]["parameters"], reports["pytorch"][0]["parameters"]
-    if ours != theirs:
-        sys.exit(f"parameter counts differ: photomat {ours}, PyTorch {theirs}")
+    ours = reports["photomat"][0]["parameters"]
+    for side, runs in reports.items():
+        if runs[0]["parameters"] != ours:
+            sys.exit(f"parameter counts differ: photomat {ours}, {side} {runs[0]['parameters']}")
     return ours
 
 
@@ -119,9 +126,12 @@ def table(results):
         (c["flops"] / c["median_s"] for (name, _), sides in by.items() if name == "sgemm"
          for runs in sides.values() for c in runs.values()),
         default=None)
+    baseline = any("candle" in sides for sides in by.values())
     lines = ["| case | size | batch | photomat s | PyTorch s | ratio photomat/PyTorch "
-             "| photomat GFLOP/s | PyTorch GFLOP/s |",
-             "|---|---|---|---|---|---|---|---|"]
+             "| photomat GFLOP/s | PyTorch GFLOP/s |"
+             + (" plain candle s | speed-up of the kernels (candle/photomat) |" if baseline
+                else ""),
+             "|---|---|---|---|---|---|---|---|" + ("---|---|" if baseline else "")]
     for (name, size), sides in by.items():
         ours, theirs = sides["photomat"], sides["pytorch"]
         rounds = sorted(set(ours) & set(theirs))
@@ -136,8 +146,15 @@ def table(results):
             g = flops / seconds / 1e9
             share = f" ({100 * flops / seconds / ceiling:.0f} %)" if ceiling else ""
             return f"{g:.1f}{share}"
-        lines.append(f"| {name} | {size}² | {ours[rounds[0]]['batch']} | {o:.4f} | {t:.4f} | "
-                     f"{ratio:.2f} | {rate(o)} | {rate(t)} |")
+        row = (f"| {name} | {size}² | {ours[rounds[0]]['batch']} | {o:.4f} | {t:.4f} | "
+               f"{ratio:.2f} | {rate(o)} | {rate(t)} |")
+        if baseline:
+            cand = sides["candle"]
+            both = [r for r in rounds if r in cand]
+            c = statistics.median(cand[r]["median_s"] for r in both)
+            gain = statistics.median(cand[r]["median_s"] / ours[r]["median_s"] for r in both)
+            row += f" {c:.4f} | {gain:.2f} |"
+        lines.append(row)
     if ceiling:
         lines.append(f"\nsgemm ceiling (faster side, 1024² f32): {ceiling / 1e9:.1f} GFLOP/s; "
                      "percentages are shares of it.")
@@ -164,12 +181,13 @@ def main():
     for threads in a.threads:
         results = []
         for size, cases in a.configs:
-            reports = {"photomat": [], "pytorch": []}
+            sides = ("photomat", "pytorch") + (("candle",) if a.candle_baseline else ())
+            reports = {side: [] for side in sides}
             for _ in range(a.rounds):
-                for side in ("photomat", "pytorch"):
+                for side in sides:
                     reports[side].append(run_side(side, threads, size, cases, a, photomat))
             params = check_parameters(reports)
-            print(f"  parameters equal on both sides at {size}²: {params}", flush=True)
+            print(f"  parameters equal on every side at {size}²: {params}", flush=True)
             results.append(((size, cases), reports))
         everything[str(threads)] = [
             {"size": s, "cases": c, "reports": r} for (s, c), r in results]

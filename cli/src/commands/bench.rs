@@ -27,6 +27,10 @@
 //! upper one for an even count) and the minimum. Threads: `RAYON_NUM_THREADS`, else one per
 //! physical core ([`photomat_kernels::alloc`]).
 //!
+//! `--candle-reference` runs every photomat-kernels op on its plain-candle reference path
+//! ([`with_reference_ops`]): the same steps as before the fast kernels, for a three-way
+//! comparison (`bench/compare.py --candle-baseline`).
+//!
 //! The GAN cases run with candle's second-order gradients enabled
 //! ([`enable_second_order_gradients`]), as the GAN trainer runs: the R1 penalty needs them.
 
@@ -51,7 +55,7 @@ use photomat_generator::{
     Discriminator, GanModel, GeneratorConfig, NoiseInput, parameter_count, seeded_var_builder,
 };
 use photomat_kernels::testing::pseudo_random;
-use photomat_kernels::{Conv2dSpec, SplitMix64, conv2d};
+use photomat_kernels::{Conv2dSpec, SplitMix64, conv2d, with_reference_ops};
 use serde::Serialize;
 
 /// BRDF model of the estimator cases: the paper's configuration (n = 8).
@@ -218,6 +222,11 @@ pub struct Args {
     /// Print the report as JSON (the schema `bench/compare.py` reads) instead of a table.
     #[arg(long)]
     pub json: bool,
+
+    /// Run every photomat-kernels op on its plain-candle reference path
+    /// (`photomat_kernels::with_reference_ops`): the baseline before the fast kernels.
+    #[arg(long)]
+    pub candle_reference: bool,
 }
 
 /// Trainable parameter counts (buffers apart), for the equality check against PyTorch.
@@ -257,6 +266,8 @@ struct Report {
     iters: usize,
     warmup: usize,
     second_order_gradients: bool,
+    /// Whether the kernels ran on their candle reference path (`--candle-reference`).
+    reference_ops: bool,
     parameters: Parameters,
     cases: Vec<CaseReport>,
 }
@@ -556,7 +567,41 @@ fn validate(args: &Args) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Runs `case` (warm-up, then timed iterations) on its own thread; `tick` after each one.
+/// Warm-up, then timed iterations of `case` on this thread; `tick` after each one.
+fn measure(
+    case: Case,
+    s: &Setup,
+    args: &Args,
+    tick: &(dyn Fn() + Sync),
+) -> anyhow::Result<CaseReport> {
+    let (mut run, batch, flops) = step(case, s, args)?;
+    for _ in 0..args.warmup {
+        run()?;
+        tick();
+    }
+    let mut times = Vec::with_capacity(args.iters);
+    for _ in 0..args.iters {
+        let start = Instant::now();
+        run()?;
+        times.push(start.elapsed().as_secs_f64());
+        tick();
+    }
+    let mut sorted = times.clone();
+    sorted.sort_by(f64::total_cmp);
+    Ok(CaseReport {
+        name: case.name(),
+        what: case.what(),
+        size: args.size,
+        batch,
+        median_s: sorted[sorted.len() / 2],
+        min_s: sorted[0],
+        times_s: times,
+        flops,
+    })
+}
+
+/// [`measure`] on a thread of its own (on the candle reference path with
+/// `--candle-reference`: the switch is per thread).
 fn time_case(
     case: Case,
     s: &Setup,
@@ -565,31 +610,12 @@ fn time_case(
 ) -> anyhow::Result<CaseReport> {
     std::thread::scope(|scope| {
         scope
-            .spawn(|| -> anyhow::Result<CaseReport> {
-                let (mut run, batch, flops) = step(case, s, args)?;
-                for _ in 0..args.warmup {
-                    run()?;
-                    tick();
+            .spawn(|| {
+                if args.candle_reference {
+                    with_reference_ops(|| measure(case, s, args, tick))
+                } else {
+                    measure(case, s, args, tick)
                 }
-                let mut times = Vec::with_capacity(args.iters);
-                for _ in 0..args.iters {
-                    let start = Instant::now();
-                    run()?;
-                    times.push(start.elapsed().as_secs_f64());
-                    tick();
-                }
-                let mut sorted = times.clone();
-                sorted.sort_by(f64::total_cmp);
-                Ok(CaseReport {
-                    name: case.name(),
-                    what: case.what(),
-                    size: args.size,
-                    batch,
-                    median_s: sorted[sorted.len() / 2],
-                    min_s: sorted[0],
-                    times_s: times,
-                    flops,
-                })
             })
             .join()
             .unwrap_or_else(|_| bail!("the benchmark thread of case {} panicked", case.name()))
@@ -632,6 +658,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         iters: args.iters,
         warmup: args.warmup,
         second_order_gradients: second_order_gradients(),
+        reference_ops: args.candle_reference,
         parameters: setup.parameters,
         cases,
     };
@@ -674,6 +701,7 @@ mod tests {
             cases: Case::ALL.to_vec(),
             seed: 3,
             json: true,
+            candle_reference: false,
         };
         let mut out = Vec::new();
         run(&args, &mut out)?;
@@ -699,6 +727,19 @@ mod tests {
         );
         assert_eq!(report["parameters"]["g_buffers"], 512);
         assert_eq!(report["second_order_gradients"], true);
+        assert_eq!(report["reference_ops"], false);
+
+        // The plain-candle baseline runs the same steps.
+        let baseline = Args {
+            cases: vec![Case::GStep, Case::EStep],
+            candle_reference: true,
+            ..args
+        };
+        let mut out = Vec::new();
+        run(&baseline, &mut out)?;
+        let report: serde_json::Value = serde_json::from_slice(&out)?;
+        assert_eq!(report["reference_ops"], true);
+        assert_eq!(report["cases"].as_array().map(Vec::len), Some(2));
         Ok(())
     }
 
@@ -714,6 +755,7 @@ mod tests {
             cases: vec![Case::Sgemm],
             seed: 1,
             json: true,
+            candle_reference: false,
         };
         let err = run(&args, &mut out).expect_err("48 is not a power of two");
         assert!(format!("{err:#}").contains("resolution 48"), "{err:#}");
