@@ -215,13 +215,14 @@ fn resumed(args: &Args, device: &Device) -> anyhow::Result<(EstimatorTrainer, Pa
     }
     let gan = GanModel::load(&saved.gan, device)
         .with_context(|| format!("cannot load the run's GAN model {}", saved.gan.display()))?;
-    if let Some(width) = args.width
-        && architecture(&gan, brdf.channels(), width)? != saved.architecture
-    {
-        conflicts.push(format!(
-            "--width {width} contradicts the run's architecture {:?}",
-            saved.architecture
-        ));
+    if let Some(width) = args.width {
+        let given = architecture(&gan, brdf.channels(), width)?;
+        if given != saved.architecture {
+            conflicts.push(format!(
+                "--width {width} gives encoder widths {:?}, which contradicts the run's {:?}",
+                given.encoder_channels, saved.architecture.encoder_channels
+            ));
+        }
     }
     let config = apply_flags(saved.config.clone(), args);
     if let Err(e) = config.check_resume(&saved.config) {

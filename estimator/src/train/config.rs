@@ -5,8 +5,16 @@
 
 use std::path::PathBuf;
 
-use candle_core::{Result, bail};
+use photomat_core::{Error, Result};
 use serde::{Deserialize, Serialize};
+
+/// `return Err(Error::Invalid(format!(…)))`: settings errors carry no backtrace, only the
+/// message naming the field.
+macro_rules! invalid {
+    ($($arg:tt)*) => {
+        return Err(Error::Invalid(format!($($arg)*)))
+    };
+}
 
 use crate::loss::{DEFAULT_RANDOM_FEATURE_SEED, FINETUNE_L1_SIZE, REFERENCE_GRAM_SCALES};
 
@@ -119,16 +127,16 @@ impl TrainConfig {
     /// Checks every field for a GAN of side `resolution`; errors name the field.
     pub fn validate(&self, resolution: usize) -> Result<()> {
         if self.batch == 0 {
-            bail!("batch must be at least 1");
+            invalid!("batch must be at least 1");
         }
         for (name, lr) in [("lr", self.lr), ("finetune_lr", self.finetune_lr)] {
             if !(lr.is_finite() && lr > 0.0) {
-                bail!("{name} {lr} must be positive and finite");
+                invalid!("{name} {lr} must be positive and finite");
             }
         }
         for (name, b) in [("beta1", self.beta1), ("beta2", self.beta2)] {
             if !(0.0..1.0).contains(&b) {
-                bail!("{name} {b} must be in [0, 1)");
+                invalid!("{name} {b} must be in [0, 1)");
             }
         }
         for (name, w) in [
@@ -136,27 +144,27 @@ impl TrainConfig {
             ("gram_weight", self.gram_weight),
         ] {
             if !(w.is_finite() && w >= 0.0) {
-                bail!("{name} {w} must be non-negative and finite");
+                invalid!("{name} {w} must be non-negative and finite");
             }
         }
         if self.l1_weight == 0.0 && self.gram_weight == 0.0 {
-            bail!("l1_weight and gram_weight are both 0: nothing to train");
+            invalid!("l1_weight and gram_weight are both 0: nothing to train");
         }
         if self.gram_scales == 0 {
-            bail!("gram_scales must be at least 1");
+            invalid!("gram_scales must be at least 1");
         }
         let size = self.finetune_l1_size;
         if self.finetune_steps > 0 && (size == 0 || resolution % size != 0) {
-            bail!(
+            invalid!(
                 "finetune_l1_size {size} must divide the GAN's resolution {resolution} \
                  (the fine-tune's L1 compares {size}×{size} area downsamples)"
             );
         }
         if !(self.psi.is_finite() && self.psi >= 0.0) {
-            bail!("psi {} must be non-negative and finite", self.psi);
+            invalid!("psi {} must be non-negative and finite", self.psi);
         }
         if self.max_nan_steps == 0 {
-            bail!("max_nan_steps must be at least 1");
+            invalid!("max_nan_steps must be at least 1");
         }
         Ok(())
     }
@@ -164,24 +172,78 @@ impl TrainConfig {
     /// Fields a resumed run must share with the checkpoint's (everything but the step
     /// counts, which may be extended); the error names the first differing field.
     pub fn check_resume(&self, saved: &TrainConfig) -> Result<()> {
-        let a = serde_json::to_value(self).map_err(candle_core::Error::wrap)?;
-        let b = serde_json::to_value(saved).map_err(candle_core::Error::wrap)?;
+        let json = |c: &TrainConfig| {
+            serde_json::to_value(c).map_err(|e| Error::Invalid(format!("training config: {e}")))
+        };
+        let (a, b) = (json(self)?, json(saved)?);
         let (a, b) = (a.as_object(), b.as_object());
         let (Some(a), Some(b)) = (a, b) else {
-            bail!("training configs are not JSON objects");
+            invalid!("training configs are not JSON objects");
         };
         for (key, value) in a {
             if matches!(key.as_str(), "steps" | "finetune_steps") {
                 continue;
             }
             if b.get(key) != Some(value) {
-                bail!(
-                    "--resume with {key} = {value}, but the checkpoint was trained with \
-                     {key} = {}",
+                invalid!(
+                    "{key} = {value} contradicts the checkpoint's {key} = {}",
                     b.get(key).unwrap_or(&serde_json::Value::Null)
                 );
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resume_allows_longer_runs_and_names_a_changed_field() {
+        let saved = TrainConfig::default();
+        let longer = TrainConfig {
+            steps: 90_000,
+            finetune_steps: 10,
+            ..saved.clone()
+        };
+        assert!(longer.check_resume(&saved).is_ok());
+        let other = TrainConfig {
+            batch: 8,
+            ..saved.clone()
+        };
+        let err = other.check_resume(&saved).unwrap_err().to_string();
+        assert!(
+            err.contains("batch = 8") && err.contains("batch = 4"),
+            "{err}"
+        );
+    }
+
+    #[test]
+    fn validation_names_the_field() {
+        let ok = TrainConfig::default();
+        assert!(ok.validate(32).is_ok());
+        let bad_size = TrainConfig {
+            finetune_l1_size: 24,
+            ..ok.clone()
+        };
+        let err = bad_size.validate(64).unwrap_err().to_string();
+        assert!(
+            err.contains("finetune_l1_size 24") && err.contains("64"),
+            "{err}"
+        );
+        let bad_lr = TrainConfig {
+            finetune_lr: -1.0,
+            ..ok
+        };
+        assert!(
+            bad_lr
+                .validate(32)
+                .unwrap_err()
+                .to_string()
+                .contains("finetune_lr")
+        );
+        assert_eq!(TrainConfig::default().stage_at(59_999), Stage::Aligned);
+        assert_eq!(TrainConfig::default().stage_at(60_000), Stage::Finetune);
     }
 }
