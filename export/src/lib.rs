@@ -7,7 +7,7 @@
 //!   mapping and a record of what cannot be represented;
 //! - [`gltf`]: a glTF 2.0 asset (unit quad + material with `KHR_materials_specular`);
 //! - [`materialx`]: a MaterialX 1.38 document (`UsdPreviewSurface`, specular workflow);
-//! - [`hextile`]: HexTiling (Mikkelsen 2022) of a material's maps to any size without visible
+//! - [`mod@hextile`]: HexTiling (Mikkelsen 2022) of a material's maps to any size without visible
 //!   repetition, with one hex lattice shared by every map.
 //!
 //! ```no_run
