@@ -264,20 +264,22 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         let maps = estimator.estimate(&features)?;
         timings.estimate += stage.elapsed().as_secs_f64();
         let stage = Instant::now();
-        let batch = features.broadcast_as((
-            lights.len(),
-            config.feature_channels,
-            resolution,
-            resolution,
-        ))?;
-        let neural = gan
-            .relight()
-            .forward(&batch.contiguous()?, &geometry.omega)?
-            .affine(0.5, 0.5)?
-            .clamp(0.0, 1.0)?;
+        // One light at a time: M's and the renderer's intermediates scale with the batch
+        // (5 lights of a 1024² material would hold gigabytes at once).
+        let neural = (0..lights.len())
+            .map(|i| {
+                let omega = geometry.omega.narrow(0, i, 1)?;
+                gan.relight().forward(&features, &omega)
+            })
+            .collect::<candle_core::Result<Vec<_>>>()?;
+        let neural = Tensor::cat(&neural, 0)?.affine(0.5, 0.5)?.clamp(0.0, 1.0)?;
         timings.relight += stage.elapsed().as_secs_f64();
         let stage = Instant::now();
-        let analytic = render(brdf.as_ref(), &maps, &lights)?;
+        let analytic = lights
+            .iter()
+            .map(|h| render(brdf.as_ref(), &maps, std::slice::from_ref(h)))
+            .collect::<photomat_core::Result<Vec<_>>>()?;
+        let analytic = Tensor::cat(&analytic, 0)?;
         timings.render += stage.elapsed().as_secs_f64();
         let l1: Vec<f64> = (analytic.clone() - &neural)?
             .abs()?
