@@ -1,8 +1,8 @@
 //! The GAN trainer on a tiny configuration and tiny simulated data (the data crate's
 //! simulator + `prepare`): D learns to separate reals from fakes without a non-finite value,
 //! runs are deterministic under their seed, a resumed run is bit-identical to an uninterrupted
-//! one, resuming another configuration names the field, and the NaN guard skips poisoned
-//! updates and stops a diverged run.
+//! one (path-length regularisation included), resuming another configuration names the
+//! field, and the NaN guard skips poisoned updates and stops a diverged run.
 //!
 //! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
 //! through one `Once`, so the variable is written before any test thread reads it.
@@ -144,12 +144,21 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
     let dir = tempfile::tempdir()?;
     let data_dir = simulated_dataset(dir.path())?;
     let data = DatasetSource::open(&data_dir, 32)?;
-    // Tileable: the per-sample roll is part of the draws that must repeat.
-    let config = tiny_config(&data_dir, true);
+    // Tileable: the per-sample roll is part of the draws that must repeat; path-length
+    // regularisation on every other step: its running mean is part of the state.
+    let mut config = tiny_config(&data_dir, true);
+    config.pl_weight = 2.0;
+    config.g_reg_interval = 2;
 
     let mut whole = Trainer::new(config.clone(), &Device::Cpu)?;
     for _ in 0..5 {
-        whole.step(&data)?;
+        let s = whole.step(&data)?;
+        assert!(s.skipped.is_empty(), "{s:?}");
+        assert_eq!(s.path_length.is_some(), s.step % 2 == 0, "{s:?}");
+        assert!(
+            s.path_length.is_none_or(|p| p.is_finite() && p > 0.0),
+            "{s:?}"
+        );
     }
 
     let run = dir.path().join("run");

@@ -130,10 +130,10 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
     assert_eq!(rows.len(), 4, "{log}");
     assert!(rows[0].starts_with("step,kimg,loss_g,loss_d"));
     assert!(rows[3].starts_with("3,0.012,"), "{log}");
-    // SWD on step 3 only (the last column).
+    // SWD (column 10) on step 3 only.
     let swd: Vec<&str> = rows[1..]
         .iter()
-        .map(|r| r.rsplit(',').next().unwrap())
+        .map(|r| r.split(',').nth(9).unwrap())
         .collect();
     assert_eq!(&swd[..2], ["", ""], "{log}");
     assert!(swd[2].parse::<f64>().unwrap() > 0.0, "{log}");

@@ -46,10 +46,15 @@ pub struct TrainConfig {
     pub r1_gamma: f64,
     /// Steps between lazy R1 penalties on D. Default 16.
     pub r1_interval: usize,
-    /// G's lazy-regularisation interval, used only for the Adam correction: the reference
-    /// (StyleGAN2-ADA) corrects G's lr and β with c = 4/5 whether or not path-length
-    /// regularisation runs; it is not implemented here. Default 4; 0 disables the correction.
+    /// G's lazy-regularisation interval: the path-length penalty runs every this many steps
+    /// when `pl_weight` > 0, and G's Adam gets the lazy correction c = k/(k+1) either way, as
+    /// in the reference (StyleGAN2-ADA). Default 4; 0 disables both.
     pub g_reg_interval: usize,
+    /// Weight of the path-length regularisation ([`super::path_length`]); 0 disables it.
+    /// Default 0 (the reference uses 2; it costs about a G forward and a double backward on
+    /// half a batch every `g_reg_interval` steps). Absent from older `train.json` files: 0.
+    #[serde(default)]
+    pub pl_weight: f64,
     /// Probability that a batch mixes two latents' styles. Default 0.9.
     pub style_mixing_prob: f64,
     /// EMA half-life of G_ema in thousands of images. Default 10 · batch / 32 (StyleGAN2-ADA
@@ -80,6 +85,7 @@ impl TrainConfig {
             r1_gamma,
             r1_interval: 16,
             g_reg_interval: 4,
+            pl_weight: 0.0,
             style_mixing_prob: 0.9,
             ema_kimg: 10.0 * batch as f64 / 32.0,
             ema_rampup: Some(0.05),
@@ -118,6 +124,12 @@ impl TrainConfig {
         }
         if self.r1_interval == 0 {
             bail!("r1_interval must be at least 1");
+        }
+        if !(self.pl_weight.is_finite() && self.pl_weight >= 0.0) {
+            bail!("pl_weight {} must be finite and ≥ 0", self.pl_weight);
+        }
+        if self.pl_weight > 0.0 && self.g_reg_interval == 0 {
+            bail!("path-length regularisation (pl_weight > 0) needs g_reg_interval ≥ 1");
         }
         if !(0.0..=1.0).contains(&self.style_mixing_prob) {
             bail!(

@@ -1,7 +1,7 @@
 //! The run's `log.csv`: one row per training step, appended as the run goes (a row is on disk
 //! as soon as its step ends), so a plot of a live run or of an interrupted one is always
 //! possible. Columns: [`LOG_HEADER`]; empty cells where a value was not computed that step
-//! (R1 every 16 steps, SWD every `--swd-every` steps).
+//! (R1 every 16 steps, SWD every `--swd-every` steps, path length every 4 steps when on).
 //!
 //! Resuming at S steps drops the rows of steps after S (written after the checkpoint the run
 //! resumes from), so the log reads as one uninterrupted run.
@@ -15,7 +15,7 @@ use photomat_core::image_io::write_atomic;
 
 /// The header line.
 pub const LOG_HEADER: &str =
-    "step,kimg,loss_g,loss_d,real_logit,fake_logit,logit_gap,r1,seconds,swd";
+    "step,kimg,loss_g,loss_d,real_logit,fake_logit,logit_gap,r1,seconds,swd,path_length";
 
 /// One row: the state after step `step` (steps done, 1-based).
 #[derive(Debug, Clone, PartialEq)]
@@ -38,6 +38,8 @@ pub struct LogRow {
     pub seconds: f64,
     /// Sliced Wasserstein distance, when computed.
     pub swd: Option<f64>,
+    /// Mean path length, on path-length steps.
+    pub path_length: Option<f64>,
 }
 
 impl LogRow {
@@ -45,7 +47,7 @@ impl LogRow {
     pub fn line(&self) -> String {
         let opt = |v: Option<f64>| v.map(|v| format!("{v}")).unwrap_or_default();
         format!(
-            "{},{:.3},{},{},{},{},{},{},{:.3},{}",
+            "{},{:.3},{},{},{},{},{},{},{:.3},{},{}",
             self.step,
             self.kimg,
             self.loss_g,
@@ -55,7 +57,8 @@ impl LogRow {
             self.real_logit - self.fake_logit,
             opt(self.r1),
             self.seconds,
-            opt(self.swd)
+            opt(self.swd),
+            opt(self.path_length)
         )
     }
 }
@@ -138,6 +141,7 @@ mod tests {
             r1: (step % 2 == 0).then_some(0.01),
             seconds: 1.5,
             swd: None,
+            path_length: None,
         }
     }
 

@@ -7,6 +7,7 @@
 //! - [`streams`]: per-step seeds of every random draw (reproducible, resumable runs);
 //! - [`data`]: [`TrainingData`], the real crops and fake lights, over a prepared data set;
 //! - [`loss`]: non-saturating logistic losses and the lazy R1 penalty;
+//! - [`path_length`]: StyleGAN2's optional path-length regularisation of G;
 //! - [`roll`]: random per-sample roll of F in tileable mode;
 //! - [`ema`]: the moving average G_ema of G;
 //! - [`nan_guard`]: skipping non-finite updates, stopping a diverged run;
@@ -22,6 +23,7 @@ pub mod ema;
 pub mod log;
 pub mod loss;
 pub mod nan_guard;
+pub mod path_length;
 pub mod roll;
 pub mod samples;
 pub mod state;

@@ -38,6 +38,20 @@ pub enum Stream {
     DRoll = 15,
     /// Light positions of D's fakes.
     DLights = 16,
+    /// Latents of the path-length step.
+    PlLatent = 21,
+    /// Second latents for style mixing in the path-length step.
+    PlMixLatent = 22,
+    /// Noise images of the path-length step.
+    PlNoise = 23,
+    /// Style-mixing decision and cut-off of the path-length step.
+    PlMixing = 24,
+    /// Roll offsets of the path-length step.
+    PlRoll = 25,
+    /// Light positions of the path-length step.
+    PlLights = 26,
+    /// Image-space noise y of the path-length step.
+    PlImageNoise = 27,
     /// The real crops of the step.
     Crops = 17,
     /// Fixed draws of the sample grids and metrics (step unused).

@@ -6,6 +6,8 @@
 //!    ([`super::roll`]); lights drawn like the real crops' ([`TrainingData`]) give ω; M(F, ω) →
 //!    image; loss `softplus(−D(image, ω))`; Adam on G and M. The tracked `w_avg` moves
 //!    towards the batch's mean w.
+//!    Every `g_reg_interval` steps, when `pl_weight` > 0, a path-length step on half a batch
+//!    ([`super::path_length`]), a second Adam update of G and M.
 //! 2. **D step** — fresh latents, noise and lights, fakes without G's graph; real crops with
 //!    their ω; loss `softplus(D(fake)) + softplus(−D(real))`; Adam on D.
 //! 3. **R1 step** every `r1_interval` steps — `mean ‖∇ₓD(x_real, ω)‖² · γ/2 · interval`; Adam
@@ -39,6 +41,7 @@ use super::data::{TrainingData, omega_for};
 use super::ema::{Ema, ema_beta};
 use super::loss::{discriminator_loss, generator_loss, r1_loss};
 use super::nan_guard::{NanGuard, gradients_finite};
+use super::path_length::{PL_BATCH_SHRINK, PathLengthMean, path_lengths, pl_loss, pl_noise};
 use super::roll::{roll_offsets, roll_per_sample};
 use super::state::{insert_renamed, insert_var, load_state, save_state};
 use super::streams::{Stream, stream_seed, stream_seeds};
@@ -72,6 +75,8 @@ pub struct StepStats {
     pub fake_logit: f64,
     /// Mean R1 penalty ‖∇ₓD‖² on the reals, on R1 steps.
     pub r1: Option<f64>,
+    /// Mean path length of the path-length step, when it ran.
+    pub path_length: Option<f64>,
     /// Phases skipped because of non-finite values, e.g. `D loss is NaN`.
     pub skipped: Vec<String>,
     /// Wall-clock seconds per phase.
@@ -81,7 +86,7 @@ pub struct StepStats {
 /// Wall-clock seconds of a step's phases (where a step's time goes).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct PhaseSeconds {
-    /// G step: generation, D forward, backward, Adam.
+    /// G step: generation, D forward, backward, Adam; and the path-length step.
     pub g: f64,
     /// D step without the real crops' loading: generation, D forward on both, backward, Adam.
     pub d: f64,
@@ -98,6 +103,7 @@ pub struct PhaseSeconds {
 enum Phase {
     G,
     D,
+    PathLength,
 }
 
 impl Phase {
@@ -119,6 +125,14 @@ impl Phase {
                 Stream::DMixing,
                 Stream::DRoll,
                 Stream::DLights,
+            ],
+            Phase::PathLength => [
+                Stream::PlLatent,
+                Stream::PlMixLatent,
+                Stream::PlNoise,
+                Stream::PlMixing,
+                Stream::PlRoll,
+                Stream::PlLights,
             ],
         }
     }
@@ -148,6 +162,8 @@ pub struct Trainer {
     opt_g: Adam,
     opt_d: Adam,
     guard: NanGuard,
+    /// Running mean path length, when path-length regularisation is on.
+    pl_mean: Option<PathLengthMean>,
     step: u64,
     counters: Var,
     state: VarMap,
@@ -191,8 +207,17 @@ impl Trainer {
         insert_renamed(&state, opt_g.state(), "", "opt_g.");
         insert_renamed(&state, opt_d.state(), "", "opt_d.");
         insert_var(&state, "trainer.counters", &counters);
+        // Only runs with the regulariser have its state (older state files load unchanged).
+        let pl_mean = if config.pl_weight > 0.0 {
+            let m = PathLengthMean::new(device)?;
+            insert_var(&state, "trainer.pl_mean", m.var());
+            Some(m)
+        } else {
+            None
+        };
         Ok(Self {
             guard: NanGuard::new(config.nan_limit),
+            pl_mean,
             config,
             device: device.clone(),
             model,
@@ -272,10 +297,17 @@ impl Trainer {
     }
 
     /// Fakes of `phase` at `step` from the training G and M.
-    fn generate(&self, phase: Phase, step: u64, data: &dyn TrainingData) -> Result<Fakes> {
+    fn generate(
+        &self,
+        phase: Phase,
+        step: u64,
+        b: usize,
+        ws_offset: Option<&Tensor>,
+        data: &dyn TrainingData,
+    ) -> Result<Fakes> {
         let [latent, mix_latent, noise, mixing, roll, lights] = phase.streams();
         let cfg = &self.config.generator;
-        let (seed, b) = (self.config.seed, self.config.batch);
+        let seed = self.config.seed;
         let g = self.model.generator();
         let z = self.model.latents(&stream_seeds(seed, step, latent, b))?;
         let w = g.mapping().forward(&z)?;
@@ -291,6 +323,9 @@ impl Trainer {
                 .model
                 .latents(&stream_seeds(seed, step, mix_latent, b))?;
             ws = mix_styles(&ws, &g.mapping().ws(&z2, 1.0, n)?, cutoff)?;
+        }
+        if let Some(u) = ws_offset {
+            ws = (ws + u)?;
         }
         let noise_images = self
             .model
@@ -315,6 +350,7 @@ impl Trainer {
         let (seed, b) = (self.config.seed, self.config.batch);
 
         let mut seconds = PhaseSeconds::default();
+        let mut pl = None;
         let mut clock = Instant::now();
         let mut lap = || {
             let t = clock.elapsed().as_secs_f64();
@@ -323,7 +359,7 @@ impl Trainer {
         };
 
         // 1. G and M.
-        let fakes = self.generate(Phase::G, step, data)?;
+        let fakes = self.generate(Phase::G, step, b, None, data)?;
         let logits = self.d.forward(&fakes.images, &fakes.omega)?;
         let loss = generator_loss(&logits)?;
         let loss_g = scalar(&loss)?;
@@ -334,12 +370,51 @@ impl Trainer {
             self.model.generator().mapping().update_w_avg(&fakes.w)?;
         }
         drop(grads);
+
+        // 1b. Lazy path-length regularisation of G (optional).
+        if let Some(mean) = &self.pl_mean
+            && step % self.config.g_reg_interval as u64 == 0
+        {
+            let pb = (b / PL_BATCH_SHRINK).max(1);
+            // candle keeps gradients only for variables: the lengths are taken with respect
+            // to a zero variable added to ws (the same derivative), so that the penalty still
+            // reaches the mapping network through ws, as in the reference.
+            let cfg = &self.config.generator;
+            let offset = Var::zeros((pb, cfg.num_ws(), cfg.latent_dim), DType::F32, &self.device)?;
+            let fakes =
+                self.generate(Phase::PathLength, step, pb, Some(offset.as_tensor()), data)?;
+            let noise = pl_noise(
+                fakes.images.dims4()?,
+                stream_seed(seed, step, Stream::PlImageNoise, 0),
+                &self.device,
+            )?;
+            let lengths = path_lengths(&fakes.images, offset.as_tensor(), &noise)?;
+            let batch_mean = scalar(&lengths.mean_all()?)?;
+            let target = if batch_mean.is_finite() {
+                mean.update(batch_mean)?
+            } else {
+                mean.value()?
+            };
+            let loss = pl_loss(
+                &lengths,
+                target,
+                self.config.pl_weight,
+                self.config.g_reg_interval,
+            )?;
+            let value = scalar(&loss)?;
+            let grads = loss.backward()?;
+            let finite = gradients_finite(&grads, self.opt_g.vars().map(|(_, v)| v))?;
+            if self.guard.allow("PL", value, finite) {
+                self.opt_g.step(&grads)?;
+            }
+            pl = Some(batch_mean);
+        }
         seconds.g = lap();
 
         // 2. D on fakes and reals.
         let reals = data.reals(b, stream_seed(seed, step, Stream::Crops, 0), &self.device)?;
         seconds.data = lap();
-        let fakes = self.generate(Phase::D, step, data)?;
+        let fakes = self.generate(Phase::D, step, b, None, data)?;
         let fake_logits = self.d.forward(&fakes.images.detach(), &fakes.omega)?;
         let real_logits = self.d.forward(&reals.images, &reals.omega)?;
         let loss = discriminator_loss(&real_logits, &fake_logits)?;
@@ -387,6 +462,7 @@ impl Trainer {
             real_logit: scalar(&real_logits.mean_all()?)?,
             fake_logit: scalar(&fake_logits.mean_all()?)?,
             r1,
+            path_length: pl,
             skipped,
             seconds,
         })
