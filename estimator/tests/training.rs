@@ -200,3 +200,46 @@ fn preview_gives_both_renders_in_display_range() -> anyhow::Result<()> {
     assert!(p.maps.contains("specular2"));
     Ok(())
 }
+
+/// A feature extractor whose features are NaN: every loss it enters is NaN.
+struct PoisonedFeatures;
+
+impl photomat_estimator::loss::FeatureExtractor for PoisonedFeatures {
+    fn describe(&self) -> String {
+        "poisoned".into()
+    }
+
+    fn features(&self, images: &Tensor) -> candle_core::Result<Vec<Tensor>> {
+        Ok(vec![(images * f64::NAN)?])
+    }
+}
+
+#[test]
+fn non_finite_steps_are_skipped_then_stop_naming_the_loss() -> anyhow::Result<()> {
+    let gan = tiny_gan(false)?;
+    let cfg = TrainConfig {
+        max_nan_steps: 2,
+        ..config(5, 0, 1e-3)
+    };
+    let mut t = EstimatorTrainer::with_extractor(
+        gan,
+        tiny_estimator("ggx", 5, 3)?,
+        cfg,
+        Box::new(PoisonedFeatures),
+    )?;
+    let before = snapshot(t.model().vars());
+    let r = t.step()?;
+    assert!(r.skipped && r.gram.is_nan() && r.l1.is_finite(), "{r:?}");
+    assert_eq!(
+        snapshot(t.model().vars()),
+        before,
+        "a skipped step changed E"
+    );
+    assert_eq!(t.adam().step_count(), 0);
+    let err = t.step().unwrap_err().to_string();
+    assert!(
+        err.contains("step 2") && err.contains("Gram = NaN"),
+        "{err}"
+    );
+    Ok(())
+}

@@ -89,7 +89,7 @@ pub struct Args {
     /// VGG19 weights (safetensors, torchvision's `vgg19().features` names
     /// `features.{0,2,5,…,34}.{weight,bias}`) for the Gram loss; without it a seeded random
     /// conv bank is used.
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", long_help = VGG19_HELP)]
     pub vgg19: Option<PathBuf>,
 
     /// Width multiplier of E's channels (1 = the paper's 32…256; 0.25 for CPU training)
@@ -117,6 +117,20 @@ pub struct Args {
     pub resume: bool,
 }
 
+/// `--help` text of `--vgg19`: what the file holds and how to write it.
+const VGG19_HELP: &str = "VGG19 weights for the Gram loss, as a safetensors file with \
+torchvision's `vgg19().features` tensors `features.{0,2,5,7,10,12,14,16,19,21,23,25,28,30,32,34}.{weight,bias}` \
+(max-pools are replaced by average pools; features after pool1–pool5, ImageNet-normalised input). \
+Write it once with PyTorch, torchvision and safetensors:
+
+  import torchvision
+  from safetensors.torch import save_file
+  vgg = torchvision.models.vgg19(weights=torchvision.models.VGG19_Weights.IMAGENET1K_V1)
+  save_file({f\"features.{k}\": v.contiguous() for k, v in vgg.features.state_dict().items()}, \"vgg19.safetensors\")
+
+Without --vgg19, a seeded random conv bank with the same five pooled stages (3→16→32→64→64→64) \
+gives the Gram statistics (Ustyuzhaninov et al. 2017).";
+
 /// `config` with every training flag that was given applied.
 fn apply_flags(mut config: TrainConfig, args: &Args) -> TrainConfig {
     if let Some(v) = args.steps {
@@ -137,8 +151,8 @@ fn apply_flags(mut config: TrainConfig, args: &Args) -> TrainConfig {
     if let Some(v) = args.seed {
         config.seed = v;
     }
-    if args.vgg19.is_some() {
-        config.vgg19 = args.vgg19.clone();
+    if let Some(path) = &args.vgg19 {
+        config.vgg19 = Some(absolute(path));
     }
     config
 }
