@@ -54,6 +54,10 @@ pub const SHEET_MAX_ROWS: usize = 64;
 /// Largest tile side in the contact sheet, in pixels (tiles are shrunk to it).
 pub const SHEET_MAX_TILE: usize = 128;
 
+/// Texels relit and rendered per call: all 5 lights at up to 512² (≈ 1.3 M texels, a few
+/// hundred MB of intermediates), one light at a time above.
+pub const LIGHT_BATCH_TEXELS: usize = 5 * 512 * 512;
+
 /// Environment variable naming the default model folder.
 pub const MODEL_ENV: &str = "PHOTOMAT_MODEL";
 
@@ -263,24 +267,25 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         let stage = Instant::now();
         let maps = estimator.estimate(&features)?;
         timings.estimate += stage.elapsed().as_secs_f64();
-        let stage = Instant::now();
-        // One light at a time: M's and the renderer's intermediates scale with the batch
-        // (5 lights of a 1024² material would hold gigabytes at once).
-        let neural = (0..lights.len())
-            .map(|i| {
-                let omega = geometry.omega.narrow(0, i, 1)?;
-                gan.relight().forward(&features, &omega)
-            })
-            .collect::<candle_core::Result<Vec<_>>>()?;
+        // Lights in groups of at most LIGHT_BATCH_TEXELS texels: M's and the renderer's
+        // intermediates scale with the batch (5 lights of a 1024² material would hold
+        // gigabytes at once); materials up to 512² keep one call for all lights.
+        let per_call = (LIGHT_BATCH_TEXELS / (resolution * resolution)).clamp(1, lights.len());
+        let mut neural = Vec::new();
+        let mut analytic = Vec::new();
+        for first in (0..lights.len()).step_by(per_call) {
+            let n = per_call.min(lights.len() - first);
+            let omega = geometry.omega.narrow(0, first, n)?;
+            let repeated = features.repeat((n, 1, 1, 1))?;
+            let relight = Instant::now();
+            neural.push(gan.relight().forward(&repeated, &omega)?);
+            timings.relight += relight.elapsed().as_secs_f64();
+            let shade = Instant::now();
+            analytic.push(render(brdf.as_ref(), &maps, &lights[first..first + n])?);
+            timings.render += shade.elapsed().as_secs_f64();
+        }
         let neural = Tensor::cat(&neural, 0)?.affine(0.5, 0.5)?.clamp(0.0, 1.0)?;
-        timings.relight += stage.elapsed().as_secs_f64();
-        let stage = Instant::now();
-        let analytic = lights
-            .iter()
-            .map(|h| render(brdf.as_ref(), &maps, std::slice::from_ref(h)))
-            .collect::<photomat_core::Result<Vec<_>>>()?;
         let analytic = Tensor::cat(&analytic, 0)?;
-        timings.render += stage.elapsed().as_secs_f64();
         let l1: Vec<f64> = (analytic.clone() - &neural)?
             .abs()?
             .flatten_from(1)?
