@@ -191,13 +191,6 @@ impl EstimatorTrainer {
         &self.config
     }
 
-    /// Changes the step counts of both stages (e.g. to extend a resumed run); the other
-    /// settings are fixed for a run.
-    pub fn set_steps(&mut self, steps: u64, finetune_steps: u64) {
-        self.config.steps = steps;
-        self.config.finetune_steps = finetune_steps;
-    }
-
     /// The estimator being trained.
     pub fn model(&self) -> &EstimatorModel {
         &self.model
