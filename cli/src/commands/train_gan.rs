@@ -102,7 +102,7 @@ pub struct Args {
     pub lr: Option<f64>,
 
     /// Weight of StyleGAN2's path-length regularisation of G, every 4 steps on half a batch
-    /// (the reference uses 2; it adds roughly a third to the step time) [default: 0, off].
+    /// (the reference uses 2; a step then takes about 1.25× as long) [default: 0, off].
     #[arg(long, value_name = "W")]
     pub pl_weight: Option<f64>,
 
