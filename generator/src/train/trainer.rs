@@ -12,8 +12,9 @@
 //!    their ω; loss `softplus(D(fake)) + softplus(−D(real))`; Adam on D.
 //! 3. **R1 step** every `r1_interval` steps — `mean ‖∇ₓD(x_real, ω)‖² · γ/2 · interval`; Adam
 //!    on D (a second D update that step, as in the reference).
-//! 4. **EMA** of G into G_ema ([`super::ema`]); M is shared by G and G_ema (the reference keeps
-//!    no EMA of M, whose lr multiplier is 0.01).
+//! 4. **EMA** of G into G_ema ([`super::ema`]). DESIGN §4 specifies an EMA of G only, so M
+//!    is shared by G and G_ema: the inference model pairs G_ema with the trained M (whose lr
+//!    multiplier of 0.01 already makes it move slowly).
 //!
 //! Any phase whose loss or gradient is not finite is skipped ([`super::nan_guard`]).
 //!
