@@ -72,6 +72,7 @@ impl TrainConfig {
     /// The reference hyper-parameters for `generator`, `data`, `batch` and `seed`.
     pub fn new(generator: GeneratorConfig, data: PathBuf, batch: usize, seed: u64) -> Self {
         let adam = AdamConfig::default();
+        // batch 0 is rejected by validate(); the max only keeps γ finite until then.
         let r1_gamma = default_r1_gamma(generator.resolution, batch.max(1));
         Self {
             generator,

@@ -39,6 +39,7 @@ impl NanGuard {
     /// A guard that stops after `limit` consecutive steps with a skipped phase.
     pub fn new(limit: usize) -> Self {
         Self {
+            // A limit of 0 would stop before any skip could be reported; 1 is the strictest.
             limit: limit.max(1),
             streak: 0,
             skipped_this_step: Vec::new(),

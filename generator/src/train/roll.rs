@@ -15,6 +15,7 @@ pub fn roll_offsets(seeds: &[u64], size: usize) -> Vec<(usize, usize)> {
             let mut rng = SplitMix64(s);
             let r = (rng.next_unit() * size as f64) as usize;
             let c = (rng.next_unit() * size as f64) as usize;
+            // next_unit() < 1 keeps both below `size`; the min only guards float rounding.
             (r.min(size - 1), c.min(size - 1))
         })
         .collect()

@@ -319,6 +319,7 @@ impl Trainer {
             .contiguous()?;
         let mut rng = SplitMix64(stream_seed(seed, step, mixing, 0));
         if n > 1 && rng.next_unit() < self.config.style_mixing_prob {
+            // Uniform in 1 … n − 1 (next_unit() < 1; the min only guards float rounding).
             let cutoff = 1 + ((rng.next_unit() * (n - 1) as f64) as usize).min(n - 2);
             let z2 = self
                 .model
