@@ -22,7 +22,18 @@
 //!   photos of procedural materials with ground-truth maps and highlights;
 //! - `photomat prepare --photos DIR --out DATASET [--size 512] [--detector robust|paper]`: flash
 //!   photos → square images, highlights, index.json and report.txt;
-//! - `photomat eval-detector --dataset DIR [--detector NAME]`: highlight error per family.
+//! - `photomat eval-detector --dataset DIR [--detector NAME]`: highlight error per family;
+//! - `photomat train-gan --data DATASET --out RUN (--steps N | --kimg K) [--size 64] [--tileable]
+//!   [--resume]`: G, M and D on flash photos; RUN is a GAN model folder;
+//! - `photomat eval-gan --gan RUN --data DATASET`: sliced Wasserstein distance to real crops;
+//! - `photomat relight --gan RUN --seed S --orbit N --out FILE.png [--gif F]`: one neural
+//!   material under moving flashes;
+//! - `photomat train-estimator --gan RUN --brdf SPEC --out MODEL`: E for any registered model;
+//!   MODEL is a complete model folder (GAN + estimator);
+//! - `photomat sample [--model MODEL] --count N --out OUT [--gltf] [--mtlx] [--hextile]`: maps,
+//!   renders, contact sheet and renderer exports of sampled materials;
+//! - `photomat bench`: whole training and sampling steps timed (JSON), the Rust side of
+//!   `bench/compare.sh`.
 
 use std::ffi::OsString;
 use std::io::Write;
@@ -59,6 +70,18 @@ enum Command {
     Prepare(commands::prepare::Args),
     /// Measure the highlight detectors against a simulated dataset's true highlights.
     EvalDetector(commands::eval_detector::Args),
+    /// Train the relightable generator G, relighting MLP M and discriminator D on a dataset.
+    TrainGan(commands::train_gan::Args),
+    /// Sliced Wasserstein distance between a GAN's relit samples and a dataset's real crops.
+    EvalGan(commands::eval_gan::Args),
+    /// Relight one neural material of a trained GAN under an orbit of flash positions.
+    Relight(commands::relight::Args),
+    /// Train the map estimator E for a named BRDF model against a frozen GAN.
+    TrainEstimator(commands::train_estimator::Args),
+    /// Sample materials from a trained model: maps, renders, contact sheet, glTF/MaterialX.
+    Sample(commands::sample::Args),
+    /// Time whole training and sampling steps (JSON), for comparison with PyTorch.
+    Bench(commands::bench::Args),
 }
 
 impl Command {
@@ -71,6 +94,12 @@ impl Command {
             Command::Simulate(args) => commands::simulate::run(args, out),
             Command::Prepare(args) => commands::prepare::run(args, out),
             Command::EvalDetector(args) => commands::eval_detector::run(args, out),
+            Command::TrainGan(args) => commands::train_gan::run(args, out),
+            Command::EvalGan(args) => commands::eval_gan::run(args, out),
+            Command::Relight(args) => commands::relight::run(args, out),
+            Command::TrainEstimator(args) => commands::train_estimator::run(args, out),
+            Command::Sample(args) => commands::sample::run(args, out),
+            Command::Bench(args) => commands::bench::run(args, out),
         }
     }
 }

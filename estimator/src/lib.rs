@@ -11,6 +11,10 @@
 //! ranges (applying the reference's tanh head exactly once, see [`unet`]).
 //!
 //! - [`Estimator`] / [`EstimatorConfig`]: the UNet ([`unet`]).
+//! - [`EstimatorModel`] ([`model_files`]): a trained E on disk with the BRDF it decodes into.
+//! - [`loss`]: the Gram (VGG19 or seeded random-feature fallback) and L1 losses of §3.
+//! - [`train`]: the two-stage training against a frozen `GanModel` (aligned, then rolled
+//!   fine-tune), resumable, behind `photomat train-estimator`.
 //! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]) on
 //!   [`photomat_kernels::conv2d`] (im2col + gemm custom ops; E's layers 2–5× faster forward +
 //!   backward than with candle's CPU `conv2d`). [`conv2d_fast_backward`] ([`conv_grad`])
@@ -44,7 +48,9 @@
 //! ```
 
 pub mod conv;
+pub mod loss;
 pub mod model_files;
+pub mod train;
 pub mod unet;
 pub mod upsample;
 

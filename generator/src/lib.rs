@@ -14,6 +14,12 @@
 //! - **D** ([`Discriminator`], [`discriminator`]): the StyleGAN2 residual discriminator on
 //!   RGB ‖ ω (6 channels).
 //!
+//! - [`GanModel`] ([`model_files`]): G + M on disk (gan.json + gan.safetensors), the inference
+//!   half of a training run, with seeded latents and noise per material seed.
+//! - [`train`]: the GAN training of `photomat train-gan` (non-saturating loss, lazy R1, Adam,
+//!   EMA, tileable roll, NaN guard, resumable state); [`swd`]: the sliced Wasserstein
+//!   distance (ProGAN) logged during training and printed by `photomat eval-gan`.
+//!
 //! Every weight is an equalised-learning-rate parameter ([`equalized`]). Parameters live in a
 //! candle [`VarMap`](candle_nn::VarMap) under the `vb.pp(..)` prefixes documented per module;
 //! [`checkpoint`] saves and loads them as safetensors, rejecting checkpoints of another
@@ -72,7 +78,9 @@ pub mod modulated_conv;
 pub mod noise;
 pub mod padding;
 pub mod relight;
+pub mod swd;
 pub mod synthesis;
+pub mod train;
 
 pub use checkpoint::{
     is_buffer, load_checkpoint, parameter_count, save_checkpoint, trainable_vars,
