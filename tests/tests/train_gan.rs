@@ -175,6 +175,21 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
     assert!(err.contains("generator.resolution"), "{err}");
     let err = train(Some(&data), &split, &short).unwrap_err().to_string();
     assert!(err.contains("--resume"), "{err}");
+
+    // A data set moved since the run started: without --data the resume names the old
+    // folder; with --data it continues and the new path is saved.
+    let moved = dir.path().join("moved-data");
+    std::fs::rename(&data, &moved).unwrap();
+    let err = train(None, &split, &["--resume", "--steps", "4"])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("training data"), "{err}");
+    let out = train(moved.to_str(), &split, &["--resume", "--steps", "4"]).unwrap();
+    assert!(out.contains("4 in total"), "{out}");
+    let saved: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(split.join("train.json")).unwrap()).unwrap();
+    let saved_data = std::path::PathBuf::from(saved["data"].as_str().unwrap());
+    assert_eq!(saved_data, std::fs::canonicalize(&moved).unwrap());
 }
 
 #[test]

@@ -106,6 +106,12 @@ pub struct Args {
     #[arg(long, value_name = "W")]
     pub pl_weight: Option<f64>,
 
+    /// R1 weight γ on D's gradient at real images, applied every 16 steps
+    /// [default: the reference's 0.0002·size²/batch]. Raise it (e.g. ×10) when D overpowers G
+    /// on a small data set (real/fake logit gap growing without bound in log.csv).
+    #[arg(long, value_name = "GAMMA")]
+    pub r1_gamma: Option<f64>,
+
     /// Steps between checkpoints (state, GAN model folder).
     #[arg(long, value_name = "N", default_value_t = 500,
           value_parser = clap::value_parser!(u64).range(1..))]
@@ -195,6 +201,9 @@ fn fresh_config(args: &Args) -> anyhow::Result<TrainConfig> {
     if let Some(w) = args.pl_weight {
         config.pl_weight = w;
     }
+    if let Some(gamma) = args.r1_gamma {
+        config.r1_gamma = gamma;
+    }
     config
         .validate()
         .map_err(|e| anyhow::anyhow!("invalid training settings: {e}"))?;
@@ -202,8 +211,22 @@ fn fresh_config(args: &Args) -> anyhow::Result<TrainConfig> {
 }
 
 /// The saved configuration of RUN, after checking that no given flag contradicts it.
+/// `--data` is the exception: it relocates a data set that was moved since the run started
+/// (the photos are the user's to keep the same), and the new path is saved at the next
+/// checkpoint.
 fn resumed_config(args: &Args) -> anyhow::Result<TrainConfig> {
-    let saved = read_config(&args.out)?;
+    let mut saved = read_config(&args.out)?;
+    if let Some(data) = &args.data {
+        let moved = absolute(data);
+        if moved != saved.data {
+            eprintln!(
+                "note: data set relocated from {} to {}",
+                saved.data.display(),
+                moved.display()
+            );
+            saved.data = moved;
+        }
+    }
     let file = args.out.join(CONFIG_FILE);
     let g = &saved.generator;
     let mut conflicts = Vec::new();
@@ -216,14 +239,6 @@ fn resumed_config(args: &Args) -> anyhow::Result<TrainConfig> {
             ));
         }
     };
-    check(
-        "--data",
-        "data",
-        args.data
-            .as_ref()
-            .map(|p| absolute(p).display().to_string()),
-        saved.data.display().to_string(),
-    );
     check(
         "--size",
         "generator.resolution",
@@ -265,6 +280,12 @@ fn resumed_config(args: &Args) -> anyhow::Result<TrainConfig> {
         "lr",
         args.lr.map(|v| v.to_string()),
         saved.lr.to_string(),
+    );
+    check(
+        "--r1-gamma",
+        "r1_gamma",
+        args.r1_gamma.map(|v| v.to_string()),
+        saved.r1_gamma.to_string(),
     );
     check(
         "--pl-weight",

@@ -80,10 +80,16 @@ pub fn save_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()
 }
 
 /// Loads the run folder `dir` into `state`, after checking that its configuration is
-/// `config`; errors name the file and the differing fields or tensors.
+/// `config` (the data set's path aside); errors name the file and the differing fields or
+/// tensors.
 pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()> {
     let saved = read_config(dir)?;
-    let diffs = config_differences(&saved, config);
+    // Where the data set lives is not part of the trained state: a moved data set resumes.
+    let relocated = TrainConfig {
+        data: config.data.clone(),
+        ..saved
+    };
+    let diffs = config_differences(&relocated, config);
     if !diffs.is_empty() {
         candle_core::bail!(
             "{}: the run was made with another configuration (saved ≠ requested): {}",
