@@ -4,85 +4,16 @@
 //! used), for the same seeded weights, in f64: in zero-padded and tileable mode, for G + M
 //! and for D.
 
+mod common;
+
 use anyhow::Result;
 use candle_core::{DType, Device, Tensor};
 use candle_nn::VarMap;
+use common::{compare, config, perturb, seeded_noise, value_and_grads};
 use photomat_generator::{
-    Discriminator, Generator, GeneratorConfig, NoiseInput, Relight, seeded_uniform,
-    seeded_var_builder,
+    Discriminator, Generator, NoiseInput, Relight, seeded_uniform, seeded_var_builder,
 };
-use photomat_kernels::testing::max_abs_diff;
 use photomat_kernels::with_reference_ops;
-
-fn config(tileable: bool) -> GeneratorConfig {
-    // 32², 8 channels per block (multiplier 1/64), w of 16, F of 8 channels: every kind of
-    // layer, small enough for the dev profile.
-    GeneratorConfig {
-        resolution: 32,
-        channel_multiplier: 1.0 / 64.0,
-        latent_dim: 16,
-        feature_channels: 8,
-        tileable,
-        ..Default::default()
-    }
-}
-
-/// Seeded weights, then every variable shifted by a seeded O(0.1) perturbation so that the
-/// biases and noise strengths (initialised to 0) are not 0 and every term is exercised.
-fn perturb(vars: &VarMap) -> Result<()> {
-    let data = vars.data().lock().expect("lock");
-    let mut names: Vec<&String> = data.keys().collect();
-    names.sort();
-    for (i, name) in names.into_iter().enumerate() {
-        let v = &data[name];
-        let noise = seeded_uniform(v.shape(), 1000 + i as u64, DType::F64, &Device::Cpu)?;
-        v.set(&(v.as_tensor() + (noise * 0.1)?)?)?;
-    }
-    Ok(())
-}
-
-/// The loss's value and its gradient w.r.t. every variable of `vars`, sorted by name.
-fn value_and_grads(loss: &Tensor, vars: &VarMap) -> Result<(f64, Vec<(String, Tensor)>)> {
-    let grads = loss.backward()?;
-    let data = vars.data().lock().expect("lock");
-    let mut out: Vec<(String, Tensor)> = data
-        .iter()
-        .filter_map(|(n, v)| grads.get(v.as_tensor()).map(|g| (n.clone(), g.clone())))
-        .collect();
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    Ok((loss.to_scalar::<f64>()?, out))
-}
-
-/// Compares the kernels' run with the reference run: same value, same set of gradients, each
-/// within `tol` of the reference relative to its largest entry.
-fn compare(
-    what: &str,
-    fast: (f64, Vec<(String, Tensor)>),
-    reference: (f64, Vec<(String, Tensor)>),
-    tol: f64,
-) -> Result<()> {
-    let ((v, g), (rv, rg)) = (fast, reference);
-    assert!(
-        (v - rv).abs() <= tol * rv.abs().max(1.0),
-        "{what}: loss {v} vs {rv}"
-    );
-    let names = |g: &[(String, Tensor)]| g.iter().map(|(n, _)| n.clone()).collect::<Vec<_>>();
-    assert_eq!(
-        names(&g),
-        names(&rg),
-        "{what}: gradients of the same variables"
-    );
-    for ((name, a), (_, b)) in g.iter().zip(&rg) {
-        let scale = b.abs()?.max_all()?.to_scalar::<f64>()?;
-        assert!(scale > 0.0, "{what}: {name} has a zero reference gradient");
-        let diff = max_abs_diff(a, b)?;
-        assert!(
-            diff <= tol * scale,
-            "{what}: ∂/∂{name} differs by {diff} (scale {scale})"
-        );
-    }
-    Ok(())
-}
 
 #[test]
 fn generator_and_relight_on_kernels_equal_plain_candle() -> Result<()> {
@@ -95,13 +26,7 @@ fn generator_and_relight_on_kernels_equal_plain_candle() -> Result<()> {
         let m = Relight::new(&cfg, vb.pp("m"))?;
         perturb(&vars)?;
         let z = seeded_uniform((2, cfg.latent_dim), 1, DType::F64, &dev)?;
-        let noise = g
-            .synthesis()
-            .noise_shapes(2)
-            .into_iter()
-            .enumerate()
-            .map(|(i, s)| seeded_uniform(s, 10 + i as u64, DType::F64, &dev))
-            .collect::<candle_core::Result<Vec<_>>>()?;
+        let noise = seeded_noise(&g, 2)?;
         let omega = seeded_uniform((2, 3, 32, 32), 2, DType::F64, &dev)?;
         let weights = seeded_uniform((2, 3, 32, 32), 3, DType::F64, &dev)?;
         let run = || -> Result<(f64, Vec<(String, Tensor)>)> {
