@@ -31,8 +31,9 @@
 //! ([`with_reference_ops`]): the same steps as before the fast kernels, for a three-way
 //! comparison (`bench/compare.py --candle-baseline`).
 //!
-//! The GAN cases run with candle's second-order gradients enabled
-//! ([`enable_second_order_gradients`]), as the GAN trainer runs: the R1 penalty needs them.
+//! When any GAN case is selected, candle's second-order gradients are enabled for the whole
+//! run before the first case ([`enable_second_order_gradients`]), as the GAN trainer runs:
+//! the R1 penalty needs them. The report's `second_order_gradients` says whether they were on.
 
 use std::io::Write;
 use std::time::Instant;
