@@ -173,6 +173,17 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
         "64",
     ]);
     assert!(err.contains("generator.resolution"), "{err}");
+    let err = photomat_error(&[
+        "train-gan",
+        "--out",
+        split.to_str().unwrap(),
+        "--resume",
+        "--steps",
+        "4",
+        "--relight-lr-multiplier",
+        "0.5",
+    ]);
+    assert!(err.contains("generator.relight_lr_multiplier"), "{err}");
     let err = train(Some(&data), &split, &short).unwrap_err().to_string();
     assert!(err.contains("--resume"), "{err}");
 

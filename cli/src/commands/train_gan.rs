@@ -106,6 +106,12 @@ pub struct Args {
     #[arg(long, value_name = "W")]
     pub pl_weight: Option<f64>,
 
+    /// Learning-rate multiplier of every layer of M [default: the reference's 0.01]. M's
+    /// weights move by about lr·multiplier/√64 per step, so short CPU runs (a few thousand
+    /// steps) need a larger one (e.g. 0.1) for M to learn to move the highlight.
+    #[arg(long, value_name = "M")]
+    pub relight_lr_multiplier: Option<f64>,
+
     /// R1 weight γ on D's gradient at real images, applied every 16 steps
     /// [default: the reference's 0.0002·size²/batch]. Raise it (e.g. ×10) when D overpowers G
     /// on a small data set (real/fake logit gap growing without bound in log.csv).
@@ -187,6 +193,9 @@ fn fresh_config(args: &Args) -> anyhow::Result<TrainConfig> {
         latent_dim: args
             .latent_dim
             .unwrap_or(GeneratorConfig::default().latent_dim),
+        relight_lr_multiplier: args
+            .relight_lr_multiplier
+            .unwrap_or(GeneratorConfig::default().relight_lr_multiplier),
         ..Default::default()
     };
     let mut config = TrainConfig::new(
@@ -256,6 +265,12 @@ fn resumed_config(args: &Args) -> anyhow::Result<TrainConfig> {
         "generator.latent_dim",
         args.latent_dim.map(|v| v.to_string()),
         g.latent_dim.to_string(),
+    );
+    check(
+        "--relight-lr-multiplier",
+        "generator.relight_lr_multiplier",
+        args.relight_lr_multiplier.map(|v| v.to_string()),
+        g.relight_lr_multiplier.to_string(),
     );
     check(
         "--tileable",
