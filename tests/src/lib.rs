@@ -15,6 +15,8 @@ use rand::{Rng, SeedableRng};
 
 pub use photomat_brdfs as brdfs;
 
+pub mod cli_fixtures;
+
 /// The models linked into plain test binaries, sorted (registry guard).
 pub const EXPECTED_BUILTINS: &[&str] = &["coated", "ggx", "height", "lambert"];
 

@@ -12,26 +12,9 @@ use candle_core::{DType, Device, Tensor};
 use photomat_core::image_io::{CONTACT_SHEET_GAP, PlanarImage, PngBits, read_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
 use photomat_core::{Highlight, MaterialMaps, registered_names, render};
+use photomat_tests::cli_fixtures::{photomat, photomat_error};
 use photomat_tests::{EXPECTED_BUILTINS, model, random_maps, rng};
 use serde_json::{Value, json};
-
-/// Run `photomat ARGS…`, returning stdout.
-fn photomat(args: &[&str]) -> anyhow::Result<String> {
-    let mut out = Vec::new();
-    photomat_cli::run_with_output(
-        std::iter::once("photomat").chain(args.iter().copied()),
-        &mut out,
-    )?;
-    Ok(String::from_utf8(out).expect("UTF-8 output"))
-}
-
-/// The error of `photomat ARGS…` formatted as the binary prints it.
-fn photomat_error(args: &[&str]) -> String {
-    match photomat(args) {
-        Ok(out) => panic!("photomat {args:?} should fail, printed:\n{out}"),
-        Err(e) => photomat_cli::format_error(&e),
-    }
-}
 
 /// A saved random `spec` material of size R in a fresh folder.
 fn material(spec: &str, size: usize) -> (tempfile::TempDir, MaterialMaps) {

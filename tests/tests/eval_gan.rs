@@ -6,9 +6,9 @@
 
 use photomat_tests as _;
 
-mod relight_support;
-
-use relight_support::{path_str, photomat, photomat_error, tiny_dataset, tiny_gan};
+use photomat_tests::cli_fixtures::{
+    path_str, photomat, photomat_error, simulated_dataset, tiny_gan,
+};
 use serde_json::Value;
 
 fn eval_json(gan: &str, data: &str, seed: &str) -> Value {
@@ -31,7 +31,7 @@ fn levels(report: &Value) -> Vec<(u64, f64)> {
 #[test]
 fn eval_gan_reports_finite_levels_for_a_tiny_model() {
     let dir = tempfile::tempdir().unwrap();
-    let data = tiny_dataset(dir.path());
+    let data = simulated_dataset(dir.path(), 64);
     let gan = tiny_gan(dir.path(), "gan", 32, 1);
     let (gan, data) = (path_str(&gan), path_str(&data));
 
@@ -70,7 +70,7 @@ fn eval_gan_reports_finite_levels_for_a_tiny_model() {
 #[test]
 fn eval_gan_errors_name_the_folders_and_sizes() {
     let dir = tempfile::tempdir().unwrap();
-    let data = tiny_dataset(dir.path());
+    let data = simulated_dataset(dir.path(), 64);
     let gan = tiny_gan(dir.path(), "gan", 32, 1);
     let (gan_s, data_s) = (path_str(&gan), path_str(&data));
 
@@ -114,7 +114,7 @@ fn eval_gan_untrained_model_is_far_from_the_data() {
     use photomat_generator::train::DatasetSource;
 
     let dir = tempfile::tempdir().unwrap();
-    let data = DatasetSource::open(&tiny_dataset(dir.path()), 32).unwrap();
+    let data = DatasetSource::open(&simulated_dataset(dir.path(), 64), 32).unwrap();
     let config = SwdConfig::default();
     let count = 32;
     let reals_a = real_crops(&data, count, 1, &Device::Cpu, &mut |_| {}).unwrap();
@@ -122,7 +122,12 @@ fn eval_gan_untrained_model_is_far_from_the_data() {
     let floor = sliced_wasserstein(&reals_a, &reals_b, &config, 1)
         .unwrap()
         .mean;
-    let model = GanModel::new(&relight_support::tiny_config(32), 5, &Device::Cpu).unwrap();
+    let model = GanModel::new(
+        &photomat_tests::cli_fixtures::tiny_gan_config(32),
+        5,
+        &Device::Cpu,
+    )
+    .unwrap();
     let fakes = model_swd(&model, &data, count, 1, &config, &mut |_, _| {})
         .unwrap()
         .mean;

@@ -4,14 +4,12 @@
 
 use photomat_tests as _;
 
-mod relight_support;
-
 use std::path::Path;
 
 use image::AnimationDecoder;
 use image::codecs::gif::GifDecoder;
 use photomat_core::image_io::{CONTACT_SHEET_GAP, PlanarImage, contact_sheet_grid, read_png};
-use relight_support::{path_str, photomat, photomat_error, tiny_gan};
+use photomat_tests::cli_fixtures::{path_str, photomat, photomat_error, tiny_gan};
 
 const SIDE: usize = 32;
 

@@ -3,50 +3,17 @@
 //! `--resume` continues where the run stopped; contradicting flags and unknown models are
 //! reported by name.
 
-use photomat_tests as _;
+use photomat_tests::cli_fixtures::{photomat, photomat_error, tiny_gan_config};
 
 use std::path::Path;
 
 use candle_core::Device;
 use photomat_core::image_io::png_header;
 use photomat_estimator::EstimatorModel;
-use photomat_generator::{GanModel, GeneratorConfig};
-
-/// Run `photomat ARGS…`, returning stdout.
-fn photomat(args: &[&str]) -> anyhow::Result<String> {
-    let mut out = Vec::new();
-    photomat_cli::run_with_output(
-        std::iter::once("photomat").chain(args.iter().copied()),
-        &mut out,
-    )?;
-    Ok(String::from_utf8(out).expect("UTF-8 output"))
-}
-
-/// The error of `photomat ARGS…` as the binary prints it.
-fn photomat_error(args: &[&str]) -> String {
-    match photomat(args) {
-        Ok(out) => panic!("photomat {args:?} should fail, printed:\n{out}"),
-        Err(e) => photomat_cli::format_error(&e),
-    }
-}
+use photomat_generator::GanModel;
 
 fn s(p: &Path) -> &str {
     p.to_str().expect("UTF-8 path")
-}
-
-/// A tiny untrained GAN model folder (32², 8 feature channels).
-fn tiny_gan(dir: &Path) -> anyhow::Result<GanModel> {
-    let cfg = GeneratorConfig {
-        resolution: 32,
-        channel_multiplier: 1.0 / 64.0,
-        latent_dim: 16,
-        feature_channels: 8,
-        relight_hidden: 8,
-        ..Default::default()
-    };
-    let gan = GanModel::new(&cfg, 4, &Device::Cpu)?;
-    gan.save(dir, serde_json::json!({"test": true}))?;
-    Ok(gan)
 }
 
 fn log_steps(run: &Path) -> Vec<u64> {
@@ -62,7 +29,8 @@ fn log_steps(run: &Path) -> Vec<u64> {
 fn train_estimator_writes_a_loadable_model_folder_and_resumes() -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let (gan_dir, run) = (dir.path().join("gan"), dir.path().join("run"));
-    let gan = tiny_gan(&gan_dir)?;
+    let gan = GanModel::new(&tiny_gan_config(32), 4, &Device::Cpu)?;
+    gan.save(&gan_dir, serde_json::json!({"test": true}))?;
     let common = [
         "--batch",
         "2",
@@ -160,7 +128,8 @@ fn train_estimator_writes_a_loadable_model_folder_and_resumes() -> anyhow::Resul
 fn train_estimator_unknown_brdf_lists_the_known_models() -> anyhow::Result<()> {
     let dir = tempfile::tempdir()?;
     let gan_dir = dir.path().join("gan");
-    tiny_gan(&gan_dir)?;
+    GanModel::new(&tiny_gan_config(32), 4, &Device::Cpu)?
+        .save(&gan_dir, serde_json::json!({"test": true}))?;
     let err = photomat_error(&[
         "train-estimator",
         "--gan",

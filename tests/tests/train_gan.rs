@@ -7,7 +7,7 @@
 //! is set; every test sets it first through one `Once`, so no test thread writes the
 //! environment while another reads it.
 
-use photomat_tests as _;
+use photomat_tests::cli_fixtures::{path_str, photomat, photomat_error, simulated_dataset};
 
 use std::path::Path;
 use std::sync::Once;
@@ -18,53 +18,6 @@ fn second_order() {
     // SAFETY: every test calls this before anything else, so no other test thread reads the
     // environment while it is written.
     ENV.call_once(|| unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") });
-}
-
-/// Run `photomat ARGS…`, returning stdout.
-fn photomat(args: &[&str]) -> anyhow::Result<String> {
-    let mut out = Vec::new();
-    photomat_cli::run_with_output(
-        std::iter::once("photomat").chain(args.iter().copied()),
-        &mut out,
-    )?;
-    Ok(String::from_utf8(out).expect("UTF-8 output"))
-}
-
-/// The error of `photomat ARGS…` as the binary prints it.
-fn photomat_error(args: &[&str]) -> String {
-    match photomat(args) {
-        Ok(out) => panic!("photomat {args:?} should fail, printed:\n{out}"),
-        Err(e) => photomat_cli::format_error(&e),
-    }
-}
-
-/// `count` simulated photos prepared at side `size` in `dir/data`.
-fn dataset(dir: &Path, size: u32) -> String {
-    let sim = dir.join("sim");
-    let data = dir.join("data");
-    photomat(&[
-        "simulate",
-        "--count",
-        "6",
-        "--size",
-        &(2 * size).to_string(),
-        "--format",
-        "png",
-        "--out",
-        sim.to_str().unwrap(),
-    ])
-    .unwrap();
-    photomat(&[
-        "prepare",
-        "--photos",
-        sim.join("photos").to_str().unwrap(),
-        "--out",
-        data.to_str().unwrap(),
-        "--size",
-        &size.to_string(),
-    ])
-    .unwrap();
-    data.to_str().unwrap().to_string()
 }
 
 /// The flags of a tiny 32² model.
@@ -90,7 +43,8 @@ fn train(data: Option<&str>, run: &Path, extra: &[&str]) -> anyhow::Result<Strin
 fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
     second_order();
     let dir = tempfile::tempdir().unwrap();
-    let data = dataset(dir.path(), 64);
+    let data = simulated_dataset(dir.path(), 64);
+    let data = path_str(&data).to_string();
     let whole = dir.path().join("whole");
     let flags: Vec<&str> = TINY
         .iter()
@@ -253,7 +207,8 @@ fn train_gan_errors_name_the_problem() {
     assert!(err.contains("--size 48"), "{err}");
 
     // 32² photos are too small for a 32² model (crops come from 2R × 2R).
-    let data = dataset(dir.path(), 32);
+    let data = simulated_dataset(dir.path(), 32);
+    let data = path_str(&data).to_string();
     let err = photomat_error(&[
         "train-gan",
         "--data",

@@ -1,14 +1,12 @@
-//! Fixtures of the `relight` and `eval-gan` command tests: the `photomat` command line run in
-//! process, an untrained tiny GAN model folder and a tiny simulated, prepared data set.
-
-#![allow(dead_code)] // each test file uses its own subset
+//! Fixtures of the command-line integration tests: `photomat` run in process, an untrained
+//! tiny GAN model folder, and a tiny simulated, prepared flash-photo data set.
 
 use std::path::{Path, PathBuf};
 
 use candle_core::Device;
 use photomat_generator::{GanModel, GeneratorConfig};
 
-/// Run `photomat ARGS…`, returning stdout.
+/// Run `photomat ARGS…` in process, returning stdout.
 pub fn photomat(args: &[&str]) -> anyhow::Result<String> {
     let mut out = Vec::new();
     photomat_cli::run_with_output(
@@ -18,7 +16,7 @@ pub fn photomat(args: &[&str]) -> anyhow::Result<String> {
     Ok(String::from_utf8(out).expect("UTF-8 output"))
 }
 
-/// The error of `photomat ARGS…` formatted as the binary prints it.
+/// The error of `photomat ARGS…` formatted as the binary prints it; panics if it succeeds.
 pub fn photomat_error(args: &[&str]) -> String {
     match photomat(args) {
         Ok(out) => panic!("photomat {args:?} should fail, printed:\n{out}"),
@@ -26,8 +24,13 @@ pub fn photomat_error(args: &[&str]) -> String {
     }
 }
 
-/// The tiny architecture of the GAN tests, at side `resolution`.
-pub fn tiny_config(resolution: usize) -> GeneratorConfig {
+/// A path as the `&str` the command line takes.
+pub fn path_str(p: &Path) -> &str {
+    p.to_str().expect("UTF-8 temp path")
+}
+
+/// The tiny GAN architecture of the tests (seconds per training step), at side `resolution`.
+pub fn tiny_gan_config(resolution: usize) -> GeneratorConfig {
     GeneratorConfig {
         resolution,
         channel_multiplier: 1.0 / 64.0,
@@ -41,25 +44,27 @@ pub fn tiny_config(resolution: usize) -> GeneratorConfig {
 /// An untrained tiny GAN (weights from `seed`) saved in `dir/name`; returns the folder.
 pub fn tiny_gan(dir: &Path, name: &str, resolution: usize, seed: u64) -> PathBuf {
     let path = dir.join(name);
-    GanModel::new(&tiny_config(resolution), seed, &Device::Cpu)
+    GanModel::new(&tiny_gan_config(resolution), seed, &Device::Cpu)
         .unwrap()
         .save(&path, serde_json::json!({ "test": true }))
         .unwrap();
     path
 }
 
-/// A data set of 6 simulated flash photos prepared at 64² (enough for 32² models) in
-/// `dir/data`; returns the folder.
-pub fn tiny_dataset(dir: &Path) -> PathBuf {
+/// A data set of 6 simulated flash photos (PNG, 2·`size` pixels) prepared at `size`² in
+/// `dir/data` — enough for models up to `size / 2`; returns the folder.
+pub fn simulated_dataset(dir: &Path, size: u32) -> PathBuf {
     let (sim, data) = (dir.join("sim"), dir.join("data"));
     photomat(&[
         "simulate",
         "--count",
         "6",
         "--size",
-        "96",
+        &(2 * size).to_string(),
         "--seed",
         "3",
+        "--format",
+        "png",
         "--out",
         path_str(&sim),
     ])
@@ -71,12 +76,8 @@ pub fn tiny_dataset(dir: &Path) -> PathBuf {
         "--out",
         path_str(&data),
         "--size",
-        "64",
+        &size.to_string(),
     ])
     .unwrap();
     data
-}
-
-pub fn path_str(p: &Path) -> &str {
-    p.to_str().expect("UTF-8 temp path")
 }
