@@ -1,0 +1,98 @@
+//! The bundled demo model (`models/demo/`), which the README's main command samples from:
+//! it is small enough to ship, it loads through the engine's model folders (a tileable GAN
+//! and a `height(ggx)` estimator), and `photomat sample` without `--model` writes materials
+//! whose maps load back, are exactly periodic, and whose analytic renders follow the neural
+//! relighting M much more closely than the untrained estimator's do.
+
+use std::path::{Path, PathBuf};
+
+use candle_core::{Device, IndexOp};
+use photomat_core::map_files::load_maps;
+use photomat_estimator::EstimatorModel;
+use photomat_generator::GanModel;
+
+/// The bundled model folder (the default of `photomat sample --model`).
+fn bundled() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/demo")
+}
+
+/// Shipping budget of the model folder's weights: "a few MB" (issue 7).
+const MAX_BUNDLED_BYTES: u64 = 8 << 20;
+
+/// Mean analytic-vs-neural L1 (encoded [−1, 1] space, 5 lights) the bundled estimator must
+/// stay under. Measured at training time: 0.036 trained vs 0.260 for an untrained
+/// estimator of the same architecture on the same GAN (docs/benchmarks.md, "Bundled demo
+/// model"); the bound sits between the two, so a broken or untrained model fails.
+const MAX_L1: f64 = 0.10;
+
+#[test]
+fn bundled_model_is_small_and_loads() {
+    let dir = bundled();
+    let total: u64 = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|entry| entry.unwrap().metadata().unwrap().len())
+        .sum();
+    assert!(total < MAX_BUNDLED_BYTES, "models/demo holds {total} bytes");
+
+    let gan = GanModel::load(&dir, &Device::Cpu).unwrap();
+    assert!(gan.config().tileable, "the bundled generator is tileable");
+    let estimator = EstimatorModel::load(&dir, &Device::Cpu).unwrap();
+    assert!(estimator.brdf().name().starts_with("height(ggx"));
+}
+
+#[test]
+fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
+    let out = tempfile::tempdir().unwrap();
+    let out_s = out.path().to_str().unwrap();
+    let mut log = Vec::new();
+    photomat_cli::run_with_output(
+        [
+            "photomat", "sample", "--count", "4", "--seed", "0", "--out", out_s,
+        ],
+        &mut log,
+    )
+    .unwrap();
+
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.path().join("summary.json")).unwrap()).unwrap();
+    let l1 = summary["l1_mean"].as_f64().unwrap();
+    assert!(l1.is_finite() && l1 < MAX_L1, "analytic vs neural L1 {l1}");
+
+    let mut folders: Vec<_> = std::fs::read_dir(out.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.join("material").is_dir())
+        .collect();
+    folders.sort();
+    assert_eq!(folders.len(), 4);
+    for folder in folders {
+        let loaded = load_maps(&folder.join("material"), None).unwrap();
+        // Tileable G + circular E: the first column continues the last one like any two
+        // neighbouring columns do (a seam would show up as a jump well above the interior's).
+        for (name, map) in loaded.maps.iter() {
+            let t = map.to_dtype(candle_core::DType::F64).unwrap();
+            let w = t.dim(3).unwrap();
+            let seam = (t.i((.., .., .., 0)).unwrap() - t.i((.., .., .., w - 1)).unwrap())
+                .unwrap()
+                .abs()
+                .unwrap()
+                .mean_all()
+                .unwrap()
+                .to_scalar::<f64>()
+                .unwrap();
+            let inner = (t.narrow(3, 1, w - 1).unwrap() - t.narrow(3, 0, w - 1).unwrap())
+                .unwrap()
+                .abs()
+                .unwrap()
+                .mean_all()
+                .unwrap()
+                .to_scalar::<f64>()
+                .unwrap();
+            assert!(
+                seam <= 3.0 * inner + 1e-6,
+                "{}: {name} seam step {seam} vs interior {inner}",
+                folder.display()
+            );
+        }
+    }
+}
