@@ -13,6 +13,7 @@ use photomat_core::lookup;
 use photomat_core::map_files::load_maps;
 use photomat_estimator::{EstimatorConfig, EstimatorModel};
 use photomat_generator::{GanModel, GeneratorConfig};
+use photomat_tests::cli_fixtures::tiny_gan_config;
 use serde_json::Value;
 
 /// A tiny untrained model folder (G/M seeded; E saved once and the folder reused, as its
@@ -21,13 +22,8 @@ fn tiny_model(tileable: bool) -> tempfile::TempDir {
     let temp = tempfile::tempdir().unwrap();
     let dir = temp.path();
     let config = GeneratorConfig {
-        resolution: 32,
-        channel_multiplier: 1.0 / 64.0,
-        latent_dim: 16,
-        feature_channels: 8,
-        relight_hidden: 8,
         tileable,
-        ..GeneratorConfig::default()
+        ..tiny_gan_config(32)
     };
     GanModel::new(&config, 3, &Device::Cpu)
         .unwrap()
