@@ -1,11 +1,16 @@
 //! # photomat-data
 //!
-//! Everything between materials and the training loop. For now: procedural SVBRDF families
-//! ([`procedural`]), the ground truth that the phone-flash simulator renders and that the
-//! demo command shows without any trained model.
+//! Everything between materials and the training loop: procedural SVBRDF families
+//! ([`procedural`]), the ground truth that the phone-flash simulator ([`simulator`]) renders
+//! and that the demo command shows without any trained model; prepared data sets
+//! ([`dataset`], [`highlight`]); training crops ([`sampler`]) and native-scale patches
+//! ([`patch`]); and [`source::DatasetSource`], a data set as the GAN trainer's
+//! `TrainingData` (this crate implements the generator's trait).
 
 pub mod dataset;
 pub mod highlight;
+pub mod patch;
 pub mod procedural;
 pub mod sampler;
 pub mod simulator;
+pub mod source;

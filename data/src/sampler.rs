@@ -1,5 +1,6 @@
-//! Training crops of flash photos and the matching light positions (DESIGN §4, issue 4 item 3,
-//! contract in docs/datasets.md "Crop sampler").
+//! Training crops of flash photos and the matching light positions for the fixed-size G
+//! (the reference implementation's crops; contract in docs/datasets.md "Crop sampler"; the
+//! spatial G's native-scale patches are [`crate::patch`]).
 //!
 //! For model size H, a prepared photo (highlight roughly centred) is resized to 2H×2H, so it
 //! spans the plane square of side 2 at flash height 1 and every H×H window of it is the unit

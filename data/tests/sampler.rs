@@ -1,5 +1,6 @@
-//! The training crop sampler: crop geometry against the whole photo's, highlights moving with
-//! the image under flips and rotations, determinism, resizing, and the dataset index reader.
+//! The training crop and patch samplers: crop and patch geometry against the whole photo's,
+//! highlights moving with the image under flips and rotations, determinism, resizing, the
+//! highlight-inside option of patches, and the dataset index reader.
 
 use std::path::Path;
 
@@ -9,6 +10,10 @@ use photomat_core::image_io::{PlanarImage, PngBits, write_png};
 use photomat_core::{FlashGeometry, Highlight};
 use photomat_data::dataset::{DatasetIndex, FlashDataset, PhotoEntry};
 use photomat_data::highlight::{DetectionStatus, DetectorKind};
+use photomat_data::patch::{
+    PatchLightSampler, PatchOptions, PatchSampler, PatchWindow, patch_side,
+    uniform_highlight_inside,
+};
 use photomat_data::sampler::{CropSampler, CropWindow, LightSampler, Symmetry, load_resized};
 use proptest::prelude::*;
 
@@ -350,4 +355,235 @@ fn sampler_crops_a_prepared_simulation() {
     for h in LightSampler::new(&dataset, 8, 1).unwrap().sample(64) {
         assert!(h.x.abs() < 0.8 && h.y.abs() < 0.8, "{h:?}");
     }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(64))]
+
+    #[test]
+    fn patch_omega_is_the_photo_omega_cut_at_the_patch(
+        photo in 2usize..40,
+        patch_frac in 0.0f64..=1.0,
+        // Highlights inside the photo and up to a quarter of it beyond.
+        hr in -0.25f64..1.25,
+        hc in -0.25f64..1.25,
+        top_frac in 0.0f64..=1.0,
+        left_frac in 0.0f64..=1.0,
+        symmetry in 0usize..8,
+    ) {
+        let p = 1 + (patch_frac * (photo - 1) as f64).round() as usize;
+        let highlight_px = (hr * photo as f64, hc * photo as f64);
+        let patch = PatchWindow {
+            window: CropWindow {
+                size: p,
+                top: (top_frac * (photo - p) as f64).round() as usize,
+                left: (left_frac * (photo - p) as f64).round() as usize,
+                symmetry: Symmetry::ALL[symmetry],
+            },
+            photo_size: photo,
+        };
+        prop_assert_eq!(patch.side(), 2.0 * p as f64 / photo as f64);
+        // The photo: the side-2 square, flash at height 1 above its highlight.
+        let whole = FlashGeometry::with_side(
+            &[Highlight::from_pixel_on(highlight_px.0, highlight_px.1, photo, 2.0)],
+            photo,
+            2.0,
+            DType::F64,
+            &Device::Cpu,
+        )
+        .unwrap();
+        let cut = FlashGeometry::with_side(
+            &[patch.highlight(highlight_px)],
+            p,
+            patch.side(),
+            DType::F64,
+            &Device::Cpu,
+        )
+        .unwrap();
+        let whole_omega: Vec<f64> = whole.omega.flatten_all().unwrap().to_vec1().unwrap();
+        let whole_d2: Vec<f64> = whole.inv_dist2.flatten_all().unwrap().to_vec1().unwrap();
+        let cut_omega: Vec<f64> = cut.omega.flatten_all().unwrap().to_vec1().unwrap();
+        let cut_d2: Vec<f64> = cut.inv_dist2.flatten_all().unwrap().to_vec1().unwrap();
+        let (ss, pp) = (photo * photo, p * p);
+        let w = patch.window;
+        for i in 0..p {
+            for j in 0..p {
+                let src = (w.top + i) * photo + w.left + j;
+                let (a, b) = w.symmetry.pixel((i, j), p);
+                let dst = a * p + b;
+                let v = w.symmetry.vector([
+                    whole_omega[src],
+                    whole_omega[ss + src],
+                    whole_omega[2 * ss + src],
+                ]);
+                for c in 0..3 {
+                    // f64 rounding of the two ways of writing the same texel position.
+                    prop_assert!(
+                        (cut_omega[c * pp + dst] - v[c]).abs() < 1e-12,
+                        "ω[{c}] at patch pixel ({a}, {b}): {} vs {}",
+                        cut_omega[c * pp + dst],
+                        v[c]
+                    );
+                }
+                prop_assert!((cut_d2[dst] - whole_d2[src]).abs() < 1e-12);
+            }
+        }
+    }
+}
+
+#[test]
+fn patch_sampler_cuts_native_pixels_and_moves_the_highlight() {
+    let dir = tempfile::tempdir().unwrap();
+    let (size, p) = (32, 8);
+    let dataset = bright_pixel_dataset(dir.path(), size, &[(5, 9), (16, 16), (27, 3)]);
+    let options = PatchOptions {
+        size: p,
+        highlight_prob: 0.5,
+    };
+    let batch = PatchSampler::new(options, 3)
+        .sample(&dataset, 24, &Device::Cpu)
+        .unwrap();
+    assert_eq!(batch.images.dims(), &[24, 3, p, p]);
+    assert_eq!(batch.side, patch_side(p, size));
+    assert_eq!(batch.side, 0.5);
+    let mut inside = 0;
+    for (b, highlight) in batch.highlights.iter().enumerate() {
+        let patch = item(&batch.images, b);
+        let bright: Vec<(usize, usize)> = (0..p * p)
+            .filter(|t| patch.data[p * p + t] > 0.9)
+            .map(|t| (t / p, t % p))
+            .collect();
+        let (row, col) = highlight.to_pixel_on(p, batch.side);
+        if (0.0..p as f64).contains(&row) && (0.0..p as f64).contains(&col) {
+            inside += 1;
+            assert_eq!(
+                bright,
+                vec![(row.floor() as usize, col.floor() as usize)],
+                "item {b}: highlight ({row}, {col})"
+            );
+        } else {
+            assert!(
+                bright.is_empty(),
+                "item {b}: highlight ({row}, {col}) outside"
+            );
+        }
+        // ω belongs to the returned placement.
+        let expected =
+            FlashGeometry::with_side(&[*highlight], p, batch.side, DType::F32, &Device::Cpu)
+                .unwrap()
+                .omega;
+        let diff = (batch.omega.narrow(0, b, 1).unwrap() - expected)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        assert_eq!(diff, 0.0);
+    }
+    // Half the patches are placed over the highlight; uniform ones rarely hold it.
+    assert!(
+        (8..=20).contains(&inside),
+        "{inside} of 24 hold the highlight"
+    );
+    // Same seed, same draws; the light sampler draws the same placements without pixels.
+    let again = PatchSampler::new(options, 3)
+        .sample(&dataset, 24, &Device::Cpu)
+        .unwrap();
+    assert_eq!(to_vec(&again.images), to_vec(&batch.images));
+    let mut lights = PatchLightSampler::new(&dataset, options, 3).unwrap();
+    assert_eq!(lights.side(), batch.side);
+    assert_eq!(lights.sample(24), batch.highlights);
+    // Patches larger than the photos are refused.
+    let err = PatchLightSampler::new(
+        &dataset,
+        PatchOptions {
+            size: 33,
+            highlight_prob: 0.5,
+        },
+        0,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(err.contains("33"), "{err}");
+}
+
+/// The fraction of `n` placements of `options` whose highlight lies inside the patch.
+fn inside_fraction(dataset: &FlashDataset, options: PatchOptions, n: usize) -> f64 {
+    let mut lights = PatchLightSampler::new(dataset, options, 17).unwrap();
+    let half = lights.side() / 2.0;
+    let inside = lights
+        .sample(n)
+        .iter()
+        .filter(|h| h.x.abs() < half && h.y.abs() < half)
+        .count();
+    inside as f64 / n as f64
+}
+
+#[test]
+fn patch_highlight_option_sets_how_often_the_highlight_is_inside() {
+    let dir = tempfile::tempdir().unwrap();
+    let (size, p) = (64, 8);
+    let dataset = bright_pixel_dataset(dir.path(), size, &[(32, 32), (30, 36), (25, 40)]);
+    // Exact under uniform positions: for a highlight at pixel centre 32.5 each axis has
+    // P of the S − P + 1 offsets holding it.
+    let centred = bright_pixel_dataset(&dir.path().join("c"), size, &[(32, 32)]);
+    let exact = uniform_highlight_inside(&centred, p).unwrap();
+    let expected = (8.0f64 / 57.0).powi(2);
+    assert!((exact - expected).abs() < 1e-15, "{exact} vs {expected}");
+    // Sampled placements follow it (20 000 draws: standard error 0.001).
+    let uniform = uniform_highlight_inside(&dataset, p).unwrap();
+    let n = 20_000;
+    let at = |highlight_prob| {
+        inside_fraction(
+            &dataset,
+            PatchOptions {
+                size: p,
+                highlight_prob,
+            },
+            n,
+        )
+    };
+    let sampled = at(0.0);
+    assert!((sampled - uniform).abs() < 0.005, "{sampled} vs {uniform}");
+    assert_eq!(at(1.0), 1.0);
+    let half = at(0.5);
+    let target = 0.5 + 0.5 * uniform;
+    assert!((half - target).abs() < 0.02, "{half} vs {target}");
+}
+
+#[test]
+fn patch_uniform_positions_rarely_hold_the_highlight_of_simulated_photos() {
+    use photomat_data::dataset::{PrepareOptions, prepare};
+    use photomat_data::procedural::families;
+    use photomat_data::simulator::{
+        CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig, simulate,
+    };
+    // Photos prepared at 128 with 16² patches: the S/P = 8 of 64² patches of 512² photos.
+    let dir = tempfile::tempdir().unwrap();
+    let (sim, data) = (dir.path().join("sim"), dir.path().join("data"));
+    let all = families();
+    let config = SimulationConfig {
+        count: 8,
+        size: 128,
+        seed: 4,
+        format: PhotoFormat::Png,
+        families: all.iter().map(|f| f.as_ref()).collect(),
+        camera: CameraSource::Phone(PhoneCamera::default()),
+        jitter: HighlightJitter::default(),
+    };
+    simulate(&sim, &config, false, &|| {}).unwrap();
+    let options = PrepareOptions {
+        size: 128,
+        progress: false,
+        ..PrepareOptions::default()
+    };
+    prepare(&sim.join("photos"), &data, &options).unwrap();
+    let dataset = FlashDataset::open(&data).unwrap();
+    let uniform = uniform_highlight_inside(&dataset, 16).unwrap();
+    // (16/113)² = 2.0 % for exactly centred highlights; the simulator's jitter moves some
+    // highlights towards the border, where fewer windows hold them.
+    println!("uniform 16² patches of 128² simulated photos hold the highlight: {uniform:.4}");
+    assert!(uniform > 0.0 && uniform < 0.03, "{uniform}");
 }

@@ -2,7 +2,7 @@
 //!
 //! The relightable generator of PhotoMat (Zhou et al., SIGGRAPH 2023), §3 "Relightable
 //! generator" and §4 "Implementation", with the architecture facts of the reference code
-//! recorded in DESIGN §4:
+//! recorded in docs/conventions.md:
 //!
 //! - **G** ([`Generator`]): a StyleGAN2 generator (Karras et al. 2020, "Analyzing and Improving
 //!   the Image Quality of StyleGAN", config F / StyleGAN2-ADA code) whose output is a 32-channel
@@ -10,6 +10,10 @@
 //!   architecture of [`modulated_conv`] layers with [`noise`], summed "toFeature" layers
 //!   upsampled with the [`fir`] filter). Optionally **tileable**: circular padding in every conv
 //!   and in the upsampling path, so that F is exactly periodic (TileGen's strategy).
+//! - Optionally **spatial** ([`spatial`], [`GeneratorConfig::spatial`]): the learned 4×4
+//!   constant is replaced by a field of local latents, one per base cell, so that G is fully
+//!   convolutional and translation-equivariant and makes materials of any multiple of its cell
+//!   size (Jetchev et al. 2016, Spatial GAN; Bergmann et al. 2017, PSGAN).
 //! - **M** ([`Relight`], [`relight`]): the per-texel relighting MLP, F ‖ ω → RGB.
 //! - **D** ([`Discriminator`], [`discriminator`]): the StyleGAN2 residual discriminator on
 //!   RGB ‖ ω (6 channels).
@@ -85,6 +89,7 @@ pub mod modulated_conv;
 pub mod noise;
 pub mod padding;
 pub mod relight;
+pub mod spatial;
 pub mod swd;
 pub mod synthesis;
 pub mod train;
@@ -98,6 +103,7 @@ pub use mapping::{Mapping, mix_styles};
 pub use model_files::{GanManifest, GanModel};
 pub use noise::NoiseInput;
 pub use relight::Relight;
+pub use spatial::{LocalInput, SpatialConfig};
 pub use synthesis::{Generator, Synthesis};
 
 use candle_core::{Result, bail};
@@ -112,7 +118,7 @@ pub const BASE_RESOLUTION: usize = 4;
 /// Channel cap of the channel table (StyleGAN2 `channel_max`).
 pub const MAX_CHANNELS: usize = 512;
 
-/// Architecture of G, M and D. The defaults are the reference configuration of DESIGN §4 at
+/// Architecture of G, M and D. The defaults are the reference configuration (docs/conventions.md) at
 /// 256² (channel multiplier 1); CPU users shrink `channel_multiplier` and `resolution`.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -145,6 +151,14 @@ pub struct GeneratorConfig {
     pub mbstd_group_size: usize,
     /// Feature channels of D's minibatch-stddev statistic. Default 1.
     pub mbstd_channels: usize,
+    /// `None` (the default): StyleGAN2's learned 4×4 constant, G is a fixed-size R×R image
+    /// model. `Some`: G starts from a field of local latents instead ([`spatial`]), is fully
+    /// convolutional and makes materials of any side that is a multiple of
+    /// [`GeneratorConfig::cell_size`]; it needs `tileable` (circular padding everywhere).
+    /// Absent from older `gan.json` files, and not written when `None`, so they load and save
+    /// unchanged.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub spatial: Option<SpatialConfig>,
 }
 
 impl Default for GeneratorConfig {
@@ -163,6 +177,7 @@ impl Default for GeneratorConfig {
             relight_lr_multiplier: 0.01,
             mbstd_group_size: 4,
             mbstd_channels: 1,
+            spatial: None,
         }
     }
 }
@@ -213,10 +228,50 @@ impl GeneratorConfig {
         if !(0.0..1.0).contains(&self.w_avg_beta) {
             bail!("w_avg_beta {} must be in [0, 1)", self.w_avg_beta);
         }
+        if let Some(spatial) = &self.spatial {
+            // Required rather than implied, so that `tileable` keeps one meaning (F is
+            // periodic) for every reader of the configuration.
+            if !self.tileable {
+                bail!(
+                    "a spatial generator needs tileable = true: its translation equivariance \
+                     rests on circular padding in every conv and wrap-around upsampling"
+                );
+            }
+            spatial.validate()?;
+        }
         Ok(())
     }
 
-    /// Channel count of G's block and D's block at resolution `res` (DESIGN §4):
+    /// Texels of F per cell of the base (4² at R = `resolution`) grid: the total stride of
+    /// the synthesis network, `resolution / 4`. A spatial G makes F of any side that is a
+    /// multiple of it (one local latent per cell).
+    pub fn cell_size(&self) -> usize {
+        self.resolution / BASE_RESOLUTION
+    }
+
+    /// The number of base cells per side of an F of side `size`: `size / cell_size` for a
+    /// spatial G and a positive multiple of the cell size, 4 for the fixed-size G at
+    /// `size = resolution`; otherwise an error saying which sizes are possible.
+    pub fn cells_for(&self, size: usize) -> Result<usize> {
+        let cell = self.cell_size();
+        match &self.spatial {
+            Some(_) if size > 0 && size % cell == 0 => Ok(size / cell),
+            Some(_) => bail!(
+                "a material side of {size} texels is not possible: this spatial generator makes \
+                 sides that are positive multiples of its cell of {cell} texels \
+                 (resolution {} / 4)",
+                self.resolution
+            ),
+            None if size == self.resolution => Ok(BASE_RESOLUTION),
+            None => bail!(
+                "this generator makes {r}×{r} materials only (a fixed-size StyleGAN2 model); \
+                 {size}×{size} needs a spatial generator",
+                r = self.resolution
+            ),
+        }
+    }
+
+    /// Channel count of G's block and D's block at resolution `res` (the reference's table):
     /// `max(1, round(min(C / res, 512) · channel_multiplier))` with C = 16384 for models below
     /// 512² and 32768 at 512² and above (so 512 up to 32², 256 at 64², 128 at 128², 64 at 256²
     /// for a 256² model). Rounding to nearest keeps e.g. multiplier ¼ exact on the table's

@@ -178,7 +178,20 @@ impl GanModel {
     /// # Shapes
     /// → one (seeds.len(), 1, r, r) tensor per noise layer.
     pub fn noise_images(&self, seeds: &[u64]) -> Result<Vec<Tensor>> {
-        let shapes = self.generator.synthesis().noise_shapes(seeds.len());
+        self.noise_images_at(seeds, self.config.resolution)
+    }
+
+    /// [`GanModel::noise_images`] for an F of side `size` ([`GeneratorConfig::cells_for`]:
+    /// any multiple of the cell size for a spatial G, R only otherwise); at `size` = R the
+    /// same images as [`GanModel::noise_images`].
+    ///
+    /// # Shapes
+    /// → one (seeds.len(), 1, s, s) tensor per noise layer ([`crate::Synthesis::noise_shapes_at`]).
+    pub fn noise_images_at(&self, seeds: &[u64], size: usize) -> Result<Vec<Tensor>> {
+        let shapes = self
+            .generator
+            .synthesis()
+            .noise_shapes_at(seeds.len(), size)?;
         let mut streams: Vec<_> = seeds
             .iter()
             .map(|&s| photomat_kernels::SplitMix64(s ^ NOISE_STREAM_KEY))
@@ -196,20 +209,55 @@ impl GanModel {
             .collect()
     }
 
+    /// The local latent fields of a spatial G for an F of side `size`, i.i.d. N(0, 1) per
+    /// seed from a stream distinct from z's and the noise's. Errors for the fixed-size G and
+    /// for sides that are not a multiple of the cell size.
+    ///
+    /// # Shapes
+    /// → (seeds.len(), local_dim, n, n), n = size / cell size, f32.
+    pub fn local_fields(&self, seeds: &[u64], size: usize) -> Result<Tensor> {
+        let (b, c, h, w) = self.generator.synthesis().field_shape(seeds.len(), size)?;
+        let values: Vec<f32> = seeds
+            .iter()
+            .flat_map(|&s| photomat_kernels::SplitMix64(s ^ FIELD_STREAM_KEY).normals(c * h * w))
+            .map(|v| v as f32)
+            .collect();
+        Tensor::from_vec(values, (b, c, h, w), &self.device)
+    }
+
     /// The neural materials of `seeds` with truncation ψ (1 = none) and the seeds' own noise:
     /// deterministic per seed.
     ///
     /// # Shapes
     /// → (seeds.len(), feature_channels, R, R).
     pub fn features_for_seeds(&self, seeds: &[u64], psi: f64) -> Result<Tensor> {
+        self.features_for_seeds_at(seeds, psi, self.config.resolution)
+    }
+
+    /// The neural materials of `seeds` at side `size` (a spatial G: any multiple of
+    /// [`GeneratorConfig::cell_size`]; the fixed-size G: R only, with an error naming the
+    /// possible sizes otherwise), from the seeds' own z, local field and noise: deterministic
+    /// per seed and size.
+    ///
+    /// # Shapes
+    /// → (seeds.len(), feature_channels, size, size).
+    pub fn features_for_seeds_at(&self, seeds: &[u64], psi: f64, size: usize) -> Result<Tensor> {
         let z = self.latents(seeds)?;
-        let noise = self.noise_images(seeds)?;
-        self.generator.forward(&z, psi, &NoiseInput::Given(&noise))
+        let noise = self.noise_images_at(seeds, size)?;
+        let noise = NoiseInput::Given(&noise);
+        if self.generator.synthesis().is_spatial() {
+            let field = self.local_fields(seeds, size)?;
+            self.generator.forward_field(&z, &field, psi, &noise)
+        } else {
+            self.generator.forward(&z, psi, &noise)
+        }
     }
 }
 
 /// Key mixed into a seed for its noise images, so that z and the noise are different streams.
 const NOISE_STREAM_KEY: u64 = 0x6E6F_6973_655F_696D; // "noise_im"
+/// Key mixed into a seed for its local latent field (spatial G).
+const FIELD_STREAM_KEY: u64 = 0x6C6F_6361_6C5F_6669; // "local_fi"
 
 /// Reads and checks `dir/gan.json`; errors name the file and the problem.
 pub fn read_gan_manifest(dir: &Path) -> Result<GanManifest> {

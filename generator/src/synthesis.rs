@@ -28,8 +28,15 @@
 //!   rolling the constant input by t texels and every noise image accordingly rolls F by
 //!   t·R/4 texels.
 //!
+//! - **Spatial** ([`GeneratorConfig::spatial`], [`crate::spatial`]): the constant is replaced
+//!   by a field of local latents (one per base cell) mapped per cell to the base channels;
+//!   with the tileable padding G is then fully convolutional: a field of n×n cells makes F of
+//!   side n·R/4 ([`Synthesis::forward_field`]), every noise image scaled alike
+//!   ([`Synthesis::noise_shapes_at`]).
+//!
 //! Parameter names under the generator's `vb`: `mapping.*` ([`crate::mapping`]) and
-//! `synthesis.b{r}.{const, conv0.*, conv1.*, tofeat.*}` with, per conv,
+//! `synthesis.b{r}.{const, conv0.*, conv1.*, tofeat.*}` (a spatial G has
+//! `synthesis.b4.input.fc{i}.*` instead of `b4.const`) with, per conv,
 //! `affine.{weight,bias}`, `weight`, `noise_strength`, `bias`.
 
 use candle_core::{Result, Tensor, bail};
@@ -41,6 +48,7 @@ use crate::mapping::Mapping;
 use crate::modulated_conv::{ModulatedConv2d, modulated_conv2d};
 use crate::noise::{NoiseInjection, NoiseInput, noise_injection};
 use crate::padding::Padding;
+use crate::spatial::{LocalInput, local_input};
 use crate::{BASE_RESOLUTION, GeneratorConfig};
 
 /// Kernel of the synthesis convs.
@@ -142,7 +150,6 @@ impl ToFeatures {
 #[derive(Debug, Clone)]
 pub struct SynthesisBlock {
     resolution: usize,
-    const_input: Option<Tensor>,
     conv0: Option<SynthesisLayer>,
     conv1: SynthesisLayer,
     to_features: ToFeatures,
@@ -157,23 +164,19 @@ impl SynthesisBlock {
     /// One block step: (features, F so far) → (features, F) at this block's resolution.
     ///
     /// # Shapes
-    /// x (B, C_{r/2}, r/2, r/2) or None at 4², img (B, 32, r/2, r/2) or None at 4²,
-    /// ws (B, num_conv + 1, w_dim) → ((B, C_r, r, r), (B, 32, r, r)).
+    /// x (B, C_{r/2}, s/2, s/2), or the base features (B, C₄, s, s) at 4²; img (B, 32, s/2,
+    /// s/2) or None at 4²; ws (B, num_conv + 1, w_dim) → ((B, C_r, s, s), (B, 32, s, s)),
+    /// where s = r for the fixed-size G and s = r·N/R for a spatial G making side N.
     fn forward(
         &self,
-        x: Option<&Tensor>,
+        x: &Tensor,
         img: Option<&Tensor>,
         ws: &Tensor,
         noise: &[Option<Tensor>],
         padding: Padding,
     ) -> Result<(Tensor, Tensor)> {
-        let (b, _n, _d) = ws.dims3()?;
         let w_at = |i: usize| ws.narrow(1, i, 1)?.squeeze(1);
-        let mut x = match (&self.const_input, x) {
-            (Some(c), _) => c.unsqueeze(0)?.repeat((b, 1, 1, 1))?,
-            (None, Some(x)) => x.clone(),
-            (None, None) => bail!("synthesis block {}: no input features", self.resolution),
-        };
+        let mut x = x.clone();
         let mut idx = 0;
         if let Some(conv0) = &self.conv0 {
             x = conv0.forward(&x, &w_at(idx)?, noise[idx].as_ref())?;
@@ -190,13 +193,26 @@ impl SynthesisBlock {
     }
 }
 
+/// What the first (4²) block starts from.
+#[derive(Debug, Clone)]
+pub enum BaseInput {
+    /// StyleGAN2's learned constant (C₄, 4, 4) (`b4.const`): the fixed-size G.
+    Constant(Tensor),
+    /// A field of local latents mapped per cell ([`crate::spatial`], `b4.input.*`): the
+    /// spatial G.
+    Local(LocalInput),
+}
+
 /// The synthesis network: per-layer w → F.
 #[derive(Debug, Clone)]
 pub struct Synthesis {
+    base: BaseInput,
     blocks: Vec<SynthesisBlock>,
     padding: Padding,
     num_ws: usize,
     latent_dim: usize,
+    /// The architecture (for the possible output sizes).
+    config: GeneratorConfig,
 }
 
 impl Synthesis {
@@ -205,34 +221,39 @@ impl Synthesis {
         cfg.validate()?;
         let padding = Padding::for_tileable(cfg.tileable);
         let w_dim = cfg.latent_dim;
+        let c4 = cfg.channels_at(BASE_RESOLUTION);
+        let vb4 = vb.pp(format!("b{BASE_RESOLUTION}"));
+        let base = match &cfg.spatial {
+            None => {
+                let init = Init::Randn {
+                    mean: 0.0,
+                    stdev: 1.0,
+                };
+                let shape = (c4, BASE_RESOLUTION, BASE_RESOLUTION);
+                BaseInput::Constant(vb4.get_with_hints(shape, "const", init)?)
+            }
+            Some(spatial) => BaseInput::Local(local_input(spatial, c4, vb4.pp("input"))?),
+        };
         let mut blocks = Vec::with_capacity(cfg.num_blocks());
         let mut res = BASE_RESOLUTION;
         while res <= cfg.resolution {
             let vb = vb.pp(format!("b{res}"));
             let c = cfg.channels_at(res);
-            let (const_input, conv0) = if res == BASE_RESOLUTION {
-                let init = Init::Randn {
-                    mean: 0.0,
-                    stdev: 1.0,
-                };
-                (Some(vb.get_with_hints((c, res, res), "const", init)?), None)
+            let conv0 = if res == BASE_RESOLUTION {
+                None
             } else {
                 let c_in = cfg.channels_at(res / 2);
-                (
-                    None,
-                    Some(synthesis_layer(
-                        c_in,
-                        c,
-                        w_dim,
-                        true,
-                        padding,
-                        vb.pp("conv0"),
-                    )?),
-                )
+                Some(synthesis_layer(
+                    c_in,
+                    c,
+                    w_dim,
+                    true,
+                    padding,
+                    vb.pp("conv0"),
+                )?)
             };
             blocks.push(SynthesisBlock {
                 resolution: res,
-                const_input,
                 conv0,
                 conv1: synthesis_layer(c, c, w_dim, false, padding, vb.pp("conv1"))?,
                 to_features: to_features(c, cfg.feature_channels, w_dim, vb.pp("tofeat"))?,
@@ -240,10 +261,12 @@ impl Synthesis {
             res *= 2;
         }
         Ok(Self {
+            base,
             blocks,
             padding,
             num_ws: cfg.num_ws(),
             latent_dim: cfg.latent_dim,
+            config: cfg.clone(),
         })
     }
 
@@ -252,22 +275,101 @@ impl Synthesis {
         self.num_ws
     }
 
+    /// What the first block starts from.
+    pub fn base_input(&self) -> &BaseInput {
+        &self.base
+    }
+
+    /// Whether this is a spatial G (a local latent field instead of the constant).
+    pub fn is_spatial(&self) -> bool {
+        matches!(self.base, BaseInput::Local(_))
+    }
+
     /// Shapes of the noise images, one per conv, in the order [`NoiseInput::Given`] expects:
     /// (B, 1, 4, 4), then two (B, 1, r, r) per block r = 8 … R.
     pub fn noise_shapes(&self, batch: usize) -> Vec<(usize, usize, usize, usize)> {
+        self.noise_shapes_for_cells(batch, BASE_RESOLUTION)
+    }
+
+    /// Shapes of the noise images for an F of side `size` (a spatial G: any multiple of the
+    /// cell size; the fixed-size G: R only): (B, 1, n, n), then two (B, 1, n·r/4, n·r/4) per
+    /// block r = 8 … R, with n = size / cell size base cells per side.
+    pub fn noise_shapes_at(
+        &self,
+        batch: usize,
+        size: usize,
+    ) -> Result<Vec<(usize, usize, usize, usize)>> {
+        Ok(self.noise_shapes_for_cells(batch, self.config.cells_for(size)?))
+    }
+
+    fn noise_shapes_for_cells(
+        &self,
+        batch: usize,
+        cells: usize,
+    ) -> Vec<(usize, usize, usize, usize)> {
         self.blocks
             .iter()
             .flat_map(|blk| {
-                std::iter::repeat_n((batch, 1, blk.resolution, blk.resolution), blk.num_conv())
+                let side = cells * blk.resolution / BASE_RESOLUTION;
+                std::iter::repeat_n((batch, 1, side, side), blk.num_conv())
             })
             .collect()
     }
 
-    /// Per-layer w → F.
+    /// Shape of the local latent field of a spatial G making F of side `size`:
+    /// (B, local_dim, n, n) with n = size / cell size. Errors for the fixed-size G and for
+    /// sides that are not a multiple of the cell size.
+    pub fn field_shape(&self, batch: usize, size: usize) -> Result<(usize, usize, usize, usize)> {
+        match &self.base {
+            BaseInput::Local(input) => {
+                let n = self.config.cells_for(size)?;
+                Ok((batch, input.local_dim(), n, n))
+            }
+            BaseInput::Constant(_) => bail!(
+                "this generator starts from its learned constant and takes no local latent field"
+            ),
+        }
+    }
+
+    /// Per-layer w → F, for the fixed-size G (its learned constant as input).
     ///
     /// # Shapes
     /// ws (B, num_ws, w_dim) → (B, feature_channels, R, R).
     pub fn forward(&self, ws: &Tensor, noise: &NoiseInput) -> Result<Tensor> {
+        let b = self.check_ws(ws)?;
+        let x = match &self.base {
+            BaseInput::Constant(c) => c.unsqueeze(0)?.repeat((b, 1, 1, 1))?,
+            BaseInput::Local(_) => bail!(
+                "a spatial generator starts from a local latent field: use \
+                 Synthesis::forward_field"
+            ),
+        };
+        self.run(&x, ws, noise)
+    }
+
+    /// Local latent field + per-layer w → F, for a spatial G: a field of n×n cells makes F of
+    /// side n · cell size.
+    ///
+    /// # Shapes
+    /// field (B, local_dim, n, n), ws (B, num_ws, w_dim) → (B, feature_channels, N, N) with
+    /// N = n · [`GeneratorConfig::cell_size`].
+    pub fn forward_field(&self, field: &Tensor, ws: &Tensor, noise: &NoiseInput) -> Result<Tensor> {
+        let b = self.check_ws(ws)?;
+        let BaseInput::Local(input) = &self.base else {
+            bail!("a fixed-size generator takes no local latent field: use Synthesis::forward");
+        };
+        let (fb, _c, h, w) = field.dims4()?;
+        if fb != b || h != w || h == 0 {
+            bail!(
+                "local latent field of shape {:?} for ws of batch {b}: expected ({b}, {}, n, n)",
+                field.dims(),
+                input.local_dim()
+            );
+        }
+        self.run(&input.forward(field)?, ws, noise)
+    }
+
+    fn check_ws(&self, ws: &Tensor) -> Result<usize> {
         let (b, n, d) = ws.dims3()?;
         if n != self.num_ws || d != self.latent_dim {
             bail!(
@@ -277,7 +379,13 @@ impl Synthesis {
                 self.latent_dim
             );
         }
-        let shapes = self.noise_shapes(b);
+        Ok(b)
+    }
+
+    /// The blocks from base features x (B, C₄, n, n).
+    fn run(&self, x: &Tensor, ws: &Tensor, noise: &NoiseInput) -> Result<Tensor> {
+        let (b, _c, cells, _) = x.dims4()?;
+        let shapes = self.noise_shapes_for_cells(b, cells);
         let noises: Vec<Option<Tensor>> = match noise {
             NoiseInput::Zero => vec![None; shapes.len()],
             NoiseInput::Random => shapes
@@ -304,19 +412,20 @@ impl Synthesis {
                 images.iter().cloned().map(Some).collect()
             }
         };
-        let (mut x, mut img): (Option<Tensor>, Option<Tensor>) = (None, None);
+        let mut x = x.clone();
+        let mut img: Option<Tensor> = None;
         let (mut w_idx, mut noise_idx) = (0, 0);
         for block in &self.blocks {
             let nc = block.num_conv();
             let block_ws = ws.narrow(1, w_idx, nc + 1)?;
             let (nx, nimg) = block.forward(
-                x.as_ref(),
+                &x,
                 img.as_ref(),
                 &block_ws,
                 &noises[noise_idx..noise_idx + nc],
                 self.padding,
             )?;
-            x = Some(nx);
+            x = nx;
             img = Some(nimg);
             w_idx += nc;
             noise_idx += nc;
@@ -362,11 +471,28 @@ impl Generator {
         self.mapping.ws(z, psi, self.synthesis.num_ws())
     }
 
-    /// z → F with truncation ψ (1 = none).
+    /// z → F with truncation ψ (1 = none), for the fixed-size G.
     ///
     /// # Shapes
     /// (B, latent_dim) → (B, feature_channels, R, R).
     pub fn forward(&self, z: &Tensor, psi: f64, noise: &NoiseInput) -> Result<Tensor> {
         self.synthesis.forward(&self.ws(z, psi)?, noise)
+    }
+
+    /// z and a local latent field → F with truncation ψ, for a spatial G
+    /// ([`Synthesis::forward_field`]).
+    ///
+    /// # Shapes
+    /// z (B, latent_dim), field (B, local_dim, n, n) → (B, feature_channels, N, N),
+    /// N = n · cell size.
+    pub fn forward_field(
+        &self,
+        z: &Tensor,
+        field: &Tensor,
+        psi: f64,
+        noise: &NoiseInput,
+    ) -> Result<Tensor> {
+        self.synthesis
+            .forward_field(field, &self.ws(z, psi)?, noise)
     }
 }

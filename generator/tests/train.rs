@@ -15,15 +15,15 @@ use anyhow::Result;
 use candle_core::Device;
 use candle_nn::VarMap;
 use photomat_brdfs as _;
-use photomat_core::Highlight;
 use photomat_data::dataset::{PrepareOptions, prepare};
 use photomat_data::procedural::families;
 use photomat_data::simulator::{
     CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig, simulate,
 };
+use photomat_data::source::DatasetSource;
 use photomat_generator::GeneratorConfig;
 use photomat_generator::train::{
-    DatasetSource, RealBatch, TrainConfig, Trainer, TrainingData, enable_second_order_gradients,
+    FlashPlacement, RealBatch, TrainConfig, Trainer, TrainingData, enable_second_order_gradients,
 };
 
 static ENV: Once = Once::new();
@@ -208,8 +208,12 @@ impl TrainingData for Poisoned {
         Ok(r)
     }
 
-    fn fake_highlights(&self, batch: usize, seed: u64) -> candle_core::Result<Vec<Highlight>> {
-        self.inner.fake_highlights(batch, seed)
+    fn fake_lights(&self, batch: usize, seed: u64) -> candle_core::Result<Vec<FlashPlacement>> {
+        self.inner.fake_lights(batch, seed)
+    }
+
+    fn sample_side(&self) -> f64 {
+        self.inner.sample_side()
     }
 }
 

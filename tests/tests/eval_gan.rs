@@ -108,10 +108,10 @@ fn eval_gan_untrained_model_is_far_from_the_data() {
     // Two independent draws of real crops set the metric's noise floor; the smooth colour
     // blobs of an untrained G/M must lie far above it. Measured: floor 92, model 277.
     use candle_core::Device;
+    use photomat_data::source::DatasetSource;
     use photomat_generator::GanModel;
     use photomat_generator::swd::model::real_crops;
     use photomat_generator::swd::{SwdConfig, model_swd, sliced_wasserstein};
-    use photomat_generator::train::DatasetSource;
 
     let dir = tempfile::tempdir().unwrap();
     let data = DatasetSource::open(&simulated_dataset(dir.path(), 64), 32).unwrap();

@@ -17,9 +17,9 @@ use std::time::Instant;
 use anyhow::Context;
 use candle_core::Device;
 use indicatif::{ProgressBar, ProgressStyle};
+use photomat_data::source::DatasetSource;
 use photomat_generator::GanModel;
 use photomat_generator::swd::{EvalPhase, SwdConfig, model_swd};
-use photomat_generator::train::DatasetSource;
 use serde_json::json;
 
 #[derive(Debug, clap::Args)]

@@ -34,12 +34,13 @@ use anyhow::{Context, bail};
 use candle_core::Device;
 use indicatif::{ProgressBar, ProgressStyle};
 use photomat_core::image_io::{PngBits, write_png};
+use photomat_data::source::DatasetSource;
 use photomat_generator::swd::{SwdConfig, model_swd};
 use photomat_generator::train::config::TrainConfig;
 use photomat_generator::train::log::{LogRow, TrainLog};
 use photomat_generator::train::samples::sample_grid;
 use photomat_generator::train::state::{CONFIG_FILE, STATE_FILE, read_config};
-use photomat_generator::train::{DatasetSource, Trainer, enable_second_order_gradients};
+use photomat_generator::train::{Trainer, enable_second_order_gradients};
 use photomat_generator::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION};
 
 /// Default model side for a fresh run (CPU-sized).
@@ -392,8 +393,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         fresh_config(args)?
     };
     let total = total_steps(args, config.batch)?;
-    let data = DatasetSource::open(&config.data, config.generator.resolution)
-        .context("cannot open the training data")?;
+    let data = DatasetSource::for_training(&config).context("cannot open the training data")?;
     std::fs::create_dir_all(run).with_context(|| format!("cannot create {}", run.display()))?;
 
     let mut trainer = Trainer::new(config.clone(), &device)?;

@@ -3,8 +3,8 @@
 //!
 //! `count` fakes are relit samples of G and M: each from its own seed (latent and noise,
 //! [`GanModel::features_for_seeds`], ψ = 1, i.e. no truncation), under a light drawn from the
-//! data set's light distribution ([`TrainingData::fake_highlights`]: the crops' highlight
-//! positions, DESIGN §4), with per-texel ω ([`omega_for`]). `count` reals are crops drawn as
+//! data set's light distribution ([`TrainingData::fake_lights`]: the crops' flash
+//! placements), with per-texel ω ([`omega_for_placements`]). `count` reals are crops drawn as
 //! the trainer draws them ([`TrainingData::reals`]). Both sets are in the encoded space
 //! [−1, 1]; M's output is not clamped (clamping would hide overshoot the metric should see).
 //! Every draw derives from `seed`, so a model, data set, count and seed give one value.
@@ -14,7 +14,7 @@ use photomat_kernels::SplitMix64;
 
 use super::{SwdConfig, SwdReport, sliced_wasserstein};
 use crate::GanModel;
-use crate::train::data::{TrainingData, omega_for};
+use crate::train::data::{TrainingData, omega_for_placements};
 
 /// Images generated or loaded per batch: bounds memory (G's activations at 256² are large)
 /// while keeping the matrix products efficient.
@@ -54,7 +54,7 @@ pub fn relit_samples(
 ) -> Result<Tensor> {
     let r = model.config().resolution;
     let seeds = fake_seeds(seed, count);
-    let lights = data.fake_highlights(count, seed ^ LIGHT_KEY)?;
+    let lights = data.fake_lights(count, seed ^ LIGHT_KEY)?;
     let mut batches = Vec::with_capacity(count.div_ceil(EVAL_BATCH));
     for (i, (seeds, lights)) in seeds
         .chunks(EVAL_BATCH)
@@ -62,7 +62,7 @@ pub fn relit_samples(
         .enumerate()
     {
         let features = model.features_for_seeds(seeds, 1.0)?;
-        let omega = omega_for(lights, r, model.device())?;
+        let omega = omega_for_placements(lights, r, model.device())?;
         batches.push(model.relight().forward(&features, &omega)?);
         progress((i * EVAL_BATCH + seeds.len()).min(count));
     }

@@ -1,7 +1,7 @@
 //! The full configuration of a GAN training run ([`TrainConfig`], serialised as the run
 //! folder's `train.json`): the architecture ([`GeneratorConfig`]), the data set path and every
-//! hyper-parameter of StyleGAN2-ADA's training loop that PhotoMat uses (DESIGN §4), with the
-//! reference defaults.
+//! hyper-parameter of StyleGAN2-ADA's training loop that PhotoMat uses, with the
+//! reference defaults (docs/conventions.md).
 //!
 //! [`config_differences`] compares two configurations field by field (dotted JSON paths such
 //! as `generator.resolution`), so that resuming a run with a contradicting setting fails
@@ -16,7 +16,7 @@ use super::adam::AdamConfig;
 use crate::GeneratorConfig;
 
 /// StyleGAN2's R1 weight heuristic: γ = 0.0002 · R² / batch (StyleGAN2-ADA `train.py`, `auto`
-/// configuration, DESIGN §4).
+/// configuration).
 pub fn default_r1_gamma(resolution: usize, batch: usize) -> f64 {
     0.0002 * (resolution * resolution) as f64 / batch as f64
 }
@@ -66,6 +66,43 @@ pub struct TrainConfig {
     /// Consecutive steps with a skipped (non-finite) update after which training stops.
     /// Default 20.
     pub nan_limit: usize,
+    /// Native-scale patch training, present exactly when the generator is spatial
+    /// ([`GeneratorConfig::spatial`]): reals are R×R patches of the photos at their prepared
+    /// size, fakes R×R windows of larger periodic samples. Absent from (and not written to)
+    /// the `train.json` of fixed-size runs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub patches: Option<PatchTraining>,
+}
+
+/// How a spatial G trains on patches (docs/conventions.md, "Training patches").
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PatchTraining {
+    /// Probability that a real patch (and a fake's light placement) is placed so that the
+    /// photo's highlight lies inside it; otherwise the patch position is uniform over the
+    /// photo. Default [`DEFAULT_HIGHLIGHT_PROB`].
+    pub highlight_prob: f64,
+    /// Extra base cells per side of the fakes: G makes samples of R + margin · cell texels,
+    /// periodic at that side, and D sees a random R×R window of each, so that fakes are not
+    /// R-periodic where real patches are not. Default 1 (G then costs ((R + cell)/R)² as
+    /// much: 1.56× at R = 64 with its 16-texel cells); 0 trains on R-periodic fakes.
+    pub margin_cells: usize,
+}
+
+/// Default [`PatchTraining::highlight_prob`]. Under uniform positions a 64² patch of a 512²
+/// photo holds the (near-centred) highlight with probability (64/449)² ≈ 2 %
+/// (`photomat_data::patch::uniform_highlight_inside` measures it per data set): M and D would
+/// see the specular peak in one patch of fifty. With ½ every other patch shows it, as every
+/// whole-photo crop did, while the other half keep the photo's native mix of regions.
+pub const DEFAULT_HIGHLIGHT_PROB: f64 = 0.5;
+
+impl Default for PatchTraining {
+    fn default() -> Self {
+        Self {
+            highlight_prob: DEFAULT_HIGHLIGHT_PROB,
+            margin_cells: 1,
+        }
+    }
 }
 
 impl TrainConfig {
@@ -74,6 +111,7 @@ impl TrainConfig {
         let adam = AdamConfig::default();
         // batch 0 is rejected by validate(); the max only keeps γ finite until then.
         let r1_gamma = default_r1_gamma(generator.resolution, batch.max(1));
+        let spatial = generator.spatial.is_some();
         Self {
             generator,
             data,
@@ -91,6 +129,7 @@ impl TrainConfig {
             ema_kimg: 10.0 * batch as f64 / 32.0,
             ema_rampup: Some(0.05),
             nan_limit: 20,
+            patches: spatial.then(PatchTraining::default),
         }
     }
 
@@ -148,6 +187,17 @@ impl TrainConfig {
         }
         if self.nan_limit == 0 {
             bail!("nan_limit must be at least 1");
+        }
+        match (&self.generator.spatial, &self.patches) {
+            (Some(_), None) => bail!("a spatial generator trains on patches: set `patches`"),
+            (None, Some(_)) => {
+                bail!("`patches` needs a spatial generator (generator.spatial)")
+            }
+            (Some(_), Some(p)) if !(0.0..=1.0).contains(&p.highlight_prob) => bail!(
+                "patches.highlight_prob {} must be in [0, 1]",
+                p.highlight_prob
+            ),
+            _ => {}
         }
         Ok(())
     }

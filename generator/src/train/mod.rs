@@ -1,11 +1,12 @@
-//! GAN training of G, M and D (PhotoMat §3–4, StyleGAN2-ADA's training loop; DESIGN §4), one
+//! GAN training of G, M and D (PhotoMat §3–4, StyleGAN2-ADA's training loop; docs/conventions.md), one
 //! concept per module:
 //!
 //! - [`adam`]: Adam over named variables with checkpointable state and the
 //!   lazy-regularisation correction (also used by the estimator's trainer);
 //! - [`config`]: [`TrainConfig`], the run's `train.json`, with the reference defaults;
 //! - [`streams`]: per-step seeds of every random draw (reproducible, resumable runs);
-//! - [`data`]: [`TrainingData`], the real crops and fake lights, over a prepared data set;
+//! - [`data`]: [`TrainingData`], the real crops or patches and the fakes' light placements
+//!   (implemented over a prepared data set by the data crate);
 //! - [`loss`]: non-saturating logistic losses and the lazy R1 penalty;
 //! - [`path_length`]: StyleGAN2's optional path-length regularisation of G;
 //! - [`roll`]: random per-sample roll of F in tileable mode;
@@ -31,6 +32,7 @@ pub mod streams;
 pub mod trainer;
 
 pub use adam::{Adam, AdamConfig};
+pub use config::PatchTraining;
 pub use config::TrainConfig;
-pub use data::{DatasetSource, RealBatch, TrainingData};
+pub use data::{FlashPlacement, RealBatch, TrainingData};
 pub use trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};

@@ -1,7 +1,8 @@
 //! The sample grid a training run writes every few steps (`RUN/samples/step-NNNNNN.png`):
 //! [`SAMPLE_ROWS`] fixed materials of G_ema (fixed seeds, their own noise, ψ = 1), each under
-//! the four [`SAMPLE_LIGHTS`], followed by a real crop of the data set (fixed draw) for
-//! comparison: a 5 × 5 [`contact_sheet`], one material per row.
+//! the four [`SAMPLE_LIGHTS`] (scaled to the data's sample side, so that a patch-trained
+//! model is lit as its patches are), followed by a real crop or patch of the data set (fixed
+//! draw) for comparison: a 5 × 5 [`contact_sheet`], one material per row.
 //!
 //! The seeds and the real crops depend only on the run seed, so grids of successive steps
 //! show the same materials and crops.
@@ -10,7 +11,7 @@ use candle_core::{Device, Result, Tensor};
 use photomat_core::Highlight;
 use photomat_core::image_io::{PlanarImage, contact_sheet};
 
-use super::data::{TrainingData, omega_for};
+use super::data::{FlashPlacement, TrainingData, omega_for_placements};
 use super::streams::{Stream, stream_seed, stream_seeds};
 use crate::GanModel;
 
@@ -19,7 +20,7 @@ pub const SAMPLE_ROWS: usize = 5;
 
 /// The four light positions of every row: `¼·(cos θ, sin θ)` for θ = 45°, 135°, 225°, 315°
 /// (the reference's relighting positions `½·(cos θ, sin θ)` on its [−1, 1] plane, in the
-/// unit-square plane coordinates of docs/conventions.md).
+/// unit-square plane coordinates of docs/conventions.md), in units of the sample's side.
 pub const SAMPLE_LIGHTS: [(f64, f64); 4] = [
     (0.176_776_695_296_636_9, 0.176_776_695_296_636_9),
     (-0.176_776_695_296_636_9, 0.176_776_695_296_636_9),
@@ -54,9 +55,14 @@ pub fn sample_grid(
     let r = model.config().resolution;
     let seeds = stream_seeds(run_seed, 0, Stream::Fixed, SAMPLE_ROWS);
     let features = model.features_for_seeds(&seeds, 1.0)?;
+    let side = data.sample_side();
     let mut per_light = Vec::with_capacity(SAMPLE_LIGHTS.len());
     for &(x, y) in &SAMPLE_LIGHTS {
-        let omega = omega_for(&[Highlight::new(x, y); SAMPLE_ROWS], r, device)?;
+        let placement = FlashPlacement {
+            highlight: Highlight::new(x * side, y * side),
+            side,
+        };
+        let omega = omega_for_placements(&[placement; SAMPLE_ROWS], r, device)?;
         per_light.push(display_tiles(&model.relight().forward(&features, &omega)?)?);
     }
     let reals = data.reals(

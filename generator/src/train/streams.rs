@@ -1,7 +1,7 @@
 //! Seeds of the random draws of one training step, derived from the run seed, the step and
 //! the purpose of the draw, so that a step's randomness does not depend on what happened
 //! before it: two runs with the same seed draw the same latents, noise, crops, lights, rolls
-//! and mixing cut-offs, and a resumed run draws exactly what the uninterrupted run would have.
+//! mixing cut-offs and local latent fields, and a resumed run draws exactly what the uninterrupted run would have.
 //!
 //! A seed is the SplitMix64 output of the run seed mixed with the step, a stream tag and an
 //! index (e.g. the batch item), each through one SplitMix64 round (a bijective mixer: distinct
@@ -26,6 +26,8 @@ pub enum Stream {
     GRoll = 5,
     /// Light positions of G's fakes.
     GLights = 6,
+    /// Local latent fields of G's phase (spatial G).
+    GField = 7,
     /// Latents of D's phase.
     DLatent = 11,
     /// Second latents for style mixing in D's phase.
@@ -38,6 +40,8 @@ pub enum Stream {
     DRoll = 15,
     /// Light positions of D's fakes.
     DLights = 16,
+    /// Local latent fields of D's phase (spatial G).
+    DField = 18,
     /// Latents of the path-length step.
     PlLatent = 21,
     /// Second latents for style mixing in the path-length step.
@@ -52,6 +56,8 @@ pub enum Stream {
     PlLights = 26,
     /// Image-space noise y of the path-length step.
     PlImageNoise = 27,
+    /// Local latent fields of the path-length step (spatial G).
+    PlField = 28,
     /// The real crops of the step.
     Crops = 17,
     /// Fixed draws of the sample grids and metrics (step unused).

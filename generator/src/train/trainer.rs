@@ -1,31 +1,36 @@
 //! One GAN training step of PhotoMat (paper §3–4) in the order of StyleGAN2-ADA's training loop
-//! (`training_loop.py` phases Gmain, Dmain, Dreg; `loss.py` `StyleGAN2Loss`), DESIGN §4:
+//! (`training_loop.py` phases Gmain, Dmain, Dreg; `loss.py` `StyleGAN2Loss`):
 //!
 //! 1. **G step** — latents z (with style mixing, probability 0.9, one cut-off per batch drawn
 //!    in 1 … num_ws − 1), seeded noise, G → F; in tileable mode F is rolled per sample
 //!    ([`super::roll`]); lights drawn like the real crops' ([`TrainingData`]) give ω; M(F, ω) →
 //!    image; loss `softplus(−D(image, ω))`; Adam on G and M. The tracked `w_avg` moves
 //!    towards the batch's mean w.
+//!    A spatial G (training on patches, [`TrainConfig::patches`]) makes each fake at
+//!    R + margin cells from its own local latent field and D sees a random R×R window of it
+//!    (the roll, then the top-left window).
 //!    Every `g_reg_interval` steps, when `pl_weight` > 0, a path-length step on half a batch
 //!    ([`super::path_length`]), a second Adam update of G and M.
 //! 2. **D step** — fresh latents, noise and lights, fakes without G's graph; real crops with
 //!    their ω; loss `softplus(D(fake)) + softplus(−D(real))`; Adam on D.
 //! 3. **R1 step** every `r1_interval` steps — `mean ‖∇ₓD(x_real, ω)‖² · γ/2 · interval`; Adam
 //!    on D (a second D update that step, as in the reference).
-//! 4. **EMA** of G into G_ema ([`super::ema`]). DESIGN §4 specifies an EMA of G only, so M
+//! 4. **EMA** of G into G_ema ([`super::ema`]). The reference keeps an EMA of G only, so M
 //!    is shared by G and G_ema: the inference model pairs G_ema with the trained M (whose lr
 //!    multiplier of 0.01 already makes it move slowly).
 //!
 //! Any phase whose loss or gradient is not finite is skipped ([`super::nan_guard`]).
 //!
 //! Every random draw comes from a seed of (run seed, step, purpose) ([`super::streams`]):
-//! latents via [`GanModel::latents`], noise via [`GanModel::noise_images`] (fed as
+//! latents via [`GanModel::latents`], noise via [`GanModel::noise_images`] (local fields via
+//! [`GanModel::local_fields`]) (fed as
 //! [`NoiseInput::Given`]), crops and lights via [`TrainingData`], rolls and mixing via
 //! SplitMix64. With the same seed two runs produce identical weights on the CPU, and a run
 //! resumed from [`Trainer::save_state`] continues exactly as the uninterrupted one.
 //!
 //! The R1 penalty is a double backward, which candle computes only when the environment has
-//! `CANDLE_GRAD_DO_NOT_DETACH=1` before the thread's first `backward()` (DESIGN §6); see
+//! `CANDLE_GRAD_DO_NOT_DETACH=1` before the thread's first `backward()` (measured on candle
+//! 0.11); see
 //! [`enable_second_order_gradients`]. Without it the first R1 step fails with an error naming
 //! the variable.
 
@@ -38,7 +43,7 @@ use photomat_kernels::SplitMix64;
 
 use super::adam::Adam;
 use super::config::TrainConfig;
-use super::data::{TrainingData, omega_for};
+use super::data::{TrainingData, omega_for_placements};
 use super::ema::{Ema, ema_beta};
 use super::loss::{discriminator_loss, generator_loss, r1_loss};
 use super::nan_guard::{NanGuard, gradients_finite};
@@ -108,8 +113,8 @@ enum Phase {
 }
 
 impl Phase {
-    /// (latent, mixing latent, noise, mixing decision, roll, lights) streams.
-    fn streams(self) -> [Stream; 6] {
+    /// (latent, mixing latent, noise, mixing decision, roll, lights, local field) streams.
+    fn streams(self) -> [Stream; 7] {
         match self {
             Phase::G => [
                 Stream::GLatent,
@@ -118,6 +123,7 @@ impl Phase {
                 Stream::GMixing,
                 Stream::GRoll,
                 Stream::GLights,
+                Stream::GField,
             ],
             Phase::D => [
                 Stream::DLatent,
@@ -126,6 +132,7 @@ impl Phase {
                 Stream::DMixing,
                 Stream::DRoll,
                 Stream::DLights,
+                Stream::DField,
             ],
             Phase::PathLength => [
                 Stream::PlLatent,
@@ -134,6 +141,7 @@ impl Phase {
                 Stream::PlMixing,
                 Stream::PlRoll,
                 Stream::PlLights,
+                Stream::PlField,
             ],
         }
     }
@@ -306,7 +314,7 @@ impl Trainer {
         ws_offset: Option<&Tensor>,
         data: &dyn TrainingData,
     ) -> Result<Fakes> {
-        let [latent, mix_latent, noise, mixing, roll, lights] = phase.streams();
+        let [latent, mix_latent, noise, mixing, roll, lights, field] = phase.streams();
         let cfg = &self.config.generator;
         let seed = self.config.seed;
         let g = self.model.generator();
@@ -329,18 +337,43 @@ impl Trainer {
         if let Some(u) = ws_offset {
             ws = (ws + u)?;
         }
-        let noise_images = self
-            .model
-            .noise_images(&stream_seeds(seed, step, noise, b))?;
-        let mut features = g
-            .synthesis()
-            .forward(&ws, &NoiseInput::Given(&noise_images))?;
-        if cfg.tileable {
-            let offsets = roll_offsets(&stream_seeds(seed, step, roll, b), cfg.resolution);
-            features = roll_per_sample(&features, &offsets)?;
-        }
-        let highlights = data.fake_highlights(b, stream_seed(seed, step, lights, 0))?;
-        let omega = omega_for(&highlights, cfg.resolution, &self.device)?;
+        let features = match &self.config.patches {
+            None => {
+                let noise_images = self
+                    .model
+                    .noise_images(&stream_seeds(seed, step, noise, b))?;
+                let features = g
+                    .synthesis()
+                    .forward(&ws, &NoiseInput::Given(&noise_images))?;
+                if cfg.tileable {
+                    let offsets = roll_offsets(&stream_seeds(seed, step, roll, b), cfg.resolution);
+                    roll_per_sample(&features, &offsets)?
+                } else {
+                    features
+                }
+            }
+            Some(patches) => {
+                // A periodic sample of R + margin cells; the roll then the top-left R×R window
+                // is a uniformly placed window of its periodic extension.
+                let side = cfg.resolution + patches.margin_cells * cfg.cell_size();
+                let noise_images = self
+                    .model
+                    .noise_images_at(&stream_seeds(seed, step, noise, b), side)?;
+                let fields = self
+                    .model
+                    .local_fields(&stream_seeds(seed, step, field, b), side)?;
+                let features =
+                    g.synthesis()
+                        .forward_field(&fields, &ws, &NoiseInput::Given(&noise_images))?;
+                let offsets = roll_offsets(&stream_seeds(seed, step, roll, b), side);
+                roll_per_sample(&features, &offsets)?
+                    .narrow(2, 0, cfg.resolution)?
+                    .narrow(3, 0, cfg.resolution)?
+                    .contiguous()?
+            }
+        };
+        let placements = data.fake_lights(b, stream_seed(seed, step, lights, 0))?;
+        let omega = omega_for_placements(&placements, cfg.resolution, &self.device)?;
         let images = self.model.relight().forward(&features, &omega)?;
         Ok(Fakes { images, omega, w })
     }
