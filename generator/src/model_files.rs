@@ -166,7 +166,7 @@ impl GanModel {
         let d = self.config.latent_dim;
         let values: Vec<f32> = seeds
             .iter()
-            .flat_map(|&s| photomat_kernels::SplitMix64(s).normals(d))
+            .flat_map(|&s| photomat_core::rng::SplitMix64(s).normals(d))
             .map(|v| v as f32)
             .collect();
         Tensor::from_vec(values, (seeds.len(), d), &self.device)
@@ -181,7 +181,7 @@ impl GanModel {
         let shapes = self.generator.synthesis().noise_shapes(seeds.len());
         let mut streams: Vec<_> = seeds
             .iter()
-            .map(|&s| photomat_kernels::SplitMix64(s ^ NOISE_STREAM_KEY))
+            .map(|&s| photomat_core::rng::SplitMix64(s ^ NOISE_STREAM_KEY))
             .collect();
         shapes
             .iter()
