@@ -1,7 +1,13 @@
-//! Protection against non-finite updates: a phase (G's step, D's step, D's R1 step) whose loss
-//! or gradient is NaN or infinite is skipped — the weights and the optimiser's moments stay as
-//! they were — and reported; after `limit` consecutive steps with a skipped phase, training
-//! stops with an error naming the step and the loss (a diverged run, not a glitch).
+//! Protection against non-finite updates, shared by the GAN and the estimator trainers: an
+//! update (a phase of a step: G's, D's, R1's; or the estimator's one step) whose loss or
+//! gradient is NaN or infinite is skipped — the caller leaves the weights and the optimiser's
+//! moments as they were, so one bad batch cannot poison them — and reported; after `limit`
+//! consecutive steps with a skipped update, training stops with an error naming the step and
+//! the non-finite loss (a diverged run, not a glitch).
+//!
+//! A step is reported as a list of skip messages: `"<phase> loss is NaN"` and
+//! `"<phase> gradient is non-finite"` from [`NanGuard::allow`], `"<term> = <value>"` from
+//! [`NanGuard::allow_terms`].
 
 use candle_core::backprop::GradStore;
 use candle_core::{Result, Var, bail};
@@ -26,21 +32,24 @@ pub fn gradients_finite<'a>(
     Ok(true)
 }
 
-/// Counts skipped phases per step and consecutive steps with a skip.
+/// Counts skipped updates per step and consecutive steps with a skip.
 #[derive(Debug, Clone)]
 pub struct NanGuard {
     limit: usize,
+    advice: String,
     streak: usize,
     skipped_this_step: Vec<String>,
     total: u64,
 }
 
 impl NanGuard {
-    /// A guard that stops after `limit` consecutive steps with a skipped phase.
-    pub fn new(limit: usize) -> Self {
+    /// A guard that stops after `limit` consecutive steps with a skipped update; `advice`
+    /// ends the error message (what the user should do about a diverged run).
+    pub fn new(limit: usize, advice: impl Into<String>) -> Self {
         Self {
             // A limit of 0 would stop before any skip could be reported; 1 is the strictest.
             limit: limit.max(1),
+            advice: advice.into(),
             streak: 0,
             skipped_this_step: Vec::new(),
             total: 0,
@@ -58,12 +67,32 @@ impl NanGuard {
         } else {
             format!("loss is {loss}")
         };
-        self.skipped_this_step.push(format!("{phase} {what}"));
-        self.total += 1;
+        self.skip(format!("{phase} {what}"));
         false
     }
 
-    /// Closes step number `step` (1-based, as in `log.csv`: the steps done once it ends):
+    /// Whether an update whose loss is made of the named `terms` may be applied: false (and
+    /// one skip recorded, naming every non-finite term as `name = value`) when any is not
+    /// finite.
+    pub fn allow_terms(&mut self, terms: &[(&str, f64)]) -> bool {
+        let bad: Vec<String> = terms
+            .iter()
+            .filter(|(_, v)| !v.is_finite())
+            .map(|(n, v)| format!("{n} = {v}"))
+            .collect();
+        if bad.is_empty() {
+            return true;
+        }
+        self.skip(bad.join(", "));
+        false
+    }
+
+    fn skip(&mut self, message: String) {
+        self.skipped_this_step.push(message);
+        self.total += 1;
+    }
+
+    /// Closes step number `step` (1-based: the steps done once it ends, as logs number them):
     /// returns the skip messages of the step, or an error once `limit` consecutive steps had
     /// a skip.
     pub fn end_step(&mut self, step: u64) -> Result<Vec<String>> {
@@ -76,10 +105,10 @@ impl NanGuard {
         if self.streak >= self.limit {
             bail!(
                 "training stopped at step {step}: {} consecutive steps skipped because of \
-                 non-finite values (last: {}); the run has diverged — resume from the last \
-                 checkpoint with a lower --lr",
+                 non-finite values (last: {}); {}",
                 self.streak,
-                skipped.join(", ")
+                skipped.join(", "),
+                self.advice
             );
         }
         Ok(skipped)
@@ -95,7 +124,7 @@ impl NanGuard {
         self.streak = streak;
     }
 
-    /// Phases skipped since this guard was made.
+    /// Updates skipped since this guard was made.
     pub fn total_skipped(&self) -> u64 {
         self.total
     }
@@ -104,10 +133,11 @@ impl NanGuard {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use candle_core::{Device, Tensor};
 
     #[test]
     fn skips_and_stops_after_the_limit() {
-        let mut g = NanGuard::new(3);
+        let mut g = NanGuard::new(3, "lower the learning rate");
         assert!(g.allow("G", 0.5, true));
         assert!(g.end_step(0).unwrap().is_empty());
         assert!(!g.allow("D", f64::NAN, true));
@@ -125,9 +155,51 @@ mod tests {
         g.allow("R1", f64::INFINITY, true);
         let err = g.end_step(6).unwrap_err().to_string();
         assert!(
-            err.contains("step 6") && err.contains("R1 loss is inf"),
+            err.contains("step 6")
+                && err.contains("R1 loss is inf")
+                && err.contains("3 consecutive")
+                && err.ends_with("lower the learning rate"),
             "{err}"
         );
         assert_eq!(g.total_skipped(), 5);
+    }
+
+    #[test]
+    fn terms_skip_then_stop_naming_the_loss() {
+        let mut guard = NanGuard::new(3, "");
+        assert!(guard.allow_terms(&[("l1", 0.5), ("gram", 0.1)]));
+        assert!(guard.end_step(1).unwrap().is_empty());
+        assert!(!guard.allow_terms(&[("l1", 0.5), ("gram", f64::NAN)]));
+        assert_eq!(guard.end_step(2).unwrap(), ["gram = NaN"]);
+        assert!(!guard.allow_terms(&[("l1", f64::INFINITY), ("gram", f64::NAN)]));
+        assert_eq!(guard.end_step(3).unwrap(), ["l1 = inf, gram = NaN"]);
+        assert!(!guard.allow_terms(&[("l1", 0.5), ("gram", f64::NAN)]));
+        let err = guard.end_step(4).unwrap_err().to_string();
+        assert!(
+            err.contains("step 4") && err.contains("gram = NaN"),
+            "{err}"
+        );
+        // A finite step resets the streak.
+        let mut guard = NanGuard::new(2, "");
+        assert!(!guard.allow_terms(&[("gram", f64::NAN)]));
+        guard.end_step(1).unwrap();
+        assert!(guard.allow_terms(&[("gram", 1.0)]));
+        guard.end_step(2).unwrap();
+        assert!(!guard.allow_terms(&[("gram", f64::NAN)]));
+        guard.end_step(3).unwrap();
+        assert_eq!(guard.streak(), 1);
+    }
+
+    #[test]
+    fn gradients_finite_sees_nan_and_inf() -> Result<()> {
+        let a = Var::new(&[1f32, 2.0], &Device::Cpu)?;
+        let b = Var::new(&[3f32], &Device::Cpu)?;
+        let finite = (a.as_tensor().sqr()?.sum_all()? + b.as_tensor().sum_all()?)?;
+        assert!(gradients_finite(&finite.backward()?, [&a, &b])?);
+        // d/da of a·∞ is ∞; b is untouched by this loss and has no gradient (not an error).
+        let inf = Tensor::new(&[f32::INFINITY, 0.0], &Device::Cpu)?;
+        let loss = a.as_tensor().mul(&inf)?.sum_all()?;
+        assert!(!gradients_finite(&loss.backward()?, [&a, &b])?);
+        Ok(())
     }
 }
