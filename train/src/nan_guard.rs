@@ -158,7 +158,7 @@ mod tests {
             err.contains("step 6")
                 && err.contains("R1 loss is inf")
                 && err.contains("3 consecutive")
-                && err.ends_with("lower the learning rate"),
+                && err.contains("inf); lower the learning rate"),
             "{err}"
         );
         assert_eq!(g.total_skipped(), 5);

@@ -4,8 +4,8 @@
 //! 1. **G step** — latents z (with style mixing, probability 0.9, one cut-off per batch drawn
 //!    in 1 … num_ws − 1), seeded noise, G → F; in tileable mode F is rolled per sample
 //!    ([`photomat_train::roll`]); lights drawn like the real crops' ([`TrainingData`]) give
-//!    ω; M(F, ω) → image; loss `softplus(−D(image, ω))`; Adam on G and M. The tracked `w_avg` moves
-//!    towards the batch's mean w.
+//!    ω; M(F, ω) → image; loss `softplus(−D(image, ω))`; Adam on G and M. The tracked `w_avg`
+//!    moves towards the batch's mean w.
 //!    Every `g_reg_interval` steps, when `pl_weight` > 0, a path-length step on half a batch
 //!    ([`super::path_length`]), a second Adam update of G and M.
 //! 2. **D step** — fresh latents, noise and lights, fakes without G's graph; real crops with
