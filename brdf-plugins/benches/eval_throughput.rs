@@ -35,6 +35,7 @@ use std::time::Duration;
 
 use candle_core::{DType, Device, Tensor, Var};
 use criterion::{BenchmarkId, Criterion, Throughput};
+use photomat_core::rng::SplitMix64;
 use photomat_core::{Encoding, FlashGeometry, Highlight, MaterialMaps, lookup, render_radiance};
 
 // Linking pitfall (DESIGN §3): name the plugin crate so the registry sees its models.
@@ -47,17 +48,13 @@ const MODELS: &[&str] = &["lambert", "ggx", "coated", "height(ggx)"];
 /// Off-centre flash, so that no symmetry makes the work atypical.
 const LIGHT: Highlight = Highlight { x: 0.1, y: -0.1 };
 
-/// SplitMix64: reproducible random maps without extra dependencies.
-struct Rng(u64);
+/// Reproducible random maps from the workspace's seeded generator (SplitMix64).
+struct Rng(SplitMix64);
 
 impl Rng {
+    /// Uniform in [lo, hi) from the top 24 bits (an f32's mantissa).
     fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^= z >> 31;
-        lo + (hi - lo) * ((z >> 40) as f32 / (1u64 << 24) as f32)
+        lo + (hi - lo) * ((self.0.next_u64() >> 40) as f32 / (1u64 << 24) as f32)
     }
 }
 
@@ -83,7 +80,7 @@ fn random_maps(specs: &[photomat_core::ParamSpec], size: usize, rng: &mut Rng) -
 
 fn eval_throughput(c: &mut Criterion) {
     let device = Device::Cpu;
-    let mut rng = Rng(2023);
+    let mut rng = Rng(SplitMix64(2023));
     let mut group = c.benchmark_group("eval_256");
     group.throughput(Throughput::Elements((SIZE * SIZE) as u64));
 

@@ -3,7 +3,8 @@
 //! The conventions every photomat crate shares (`shared/DESIGN.md` §2–3): the
 //! [`DifferentiableBrdf`] trait and its parameter specs, the plugin [`registry`], the shared
 //! [`microfacet`] maths, the collocated-[`flash`] plane geometry, the differentiable
-//! [`render`]er and the material-map folder format ([`map_files`]).
+//! [`render`]er, the material-map folder format ([`map_files`]) and the seeded random
+//! generator every crate draws from ([`rng`]).
 //!
 //! Models live in `photomat-brdfs` (and in users' own crates); they register themselves with
 //! [`register_brdf!`] and are built by name with [`lookup`]:
@@ -28,6 +29,7 @@ pub mod param;
 pub mod plugin_spec;
 pub mod registry;
 pub mod render;
+pub mod rng;
 pub mod shading;
 pub mod vecops;
 
@@ -39,6 +41,7 @@ pub use maps::MaterialMaps;
 pub use param::{ColorSpace, Encoding, ParamSpec};
 pub use registry::{ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations};
 pub use render::{encode_display, render, render_radiance, render_radiance_with};
+pub use rng::SplitMix64;
 pub use shading::ShadingGeometry;
 
 /// Re-exports for [`register_brdf!`]; not part of the public API.

@@ -67,8 +67,10 @@ pub use photomat_kernels::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use unet::{Estimator, EstimatorConfig};
 pub use upsample::{periodic_upsample_matrix, upsample2x_periodic};
 
-/// Deterministic test inputs shared by the unit tests (from `photomat-kernels`).
+/// Deterministic test inputs (`photomat-core`'s seeded generator) and comparisons
+/// (`photomat-kernels`) shared by the unit tests.
 #[cfg(test)]
 pub(crate) mod test_util {
-    pub use photomat_kernels::testing::{max_abs_diff, pseudo_random};
+    pub use photomat_core::rng::pseudo_random;
+    pub use photomat_kernels::testing::max_abs_diff;
 }

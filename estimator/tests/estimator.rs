@@ -10,7 +10,7 @@ use photomat_estimator::{Estimator, EstimatorConfig};
 /// Values uniform in [−1, 1), f32 on the CPU, from the workspace's seeded generator (candle's
 /// CPU generator cannot be seeded), so inputs are identical on every run.
 fn pseudo_random(shape: impl Into<Shape>, seed: u64) -> Result<Tensor> {
-    photomat_kernels::testing::pseudo_random(shape, seed, DType::F32, &Device::Cpu)
+    photomat_core::rng::pseudo_random(shape, seed, DType::F32, &Device::Cpu)
 }
 
 fn max_abs(t: &Tensor) -> Result<f32> {

@@ -6,11 +6,11 @@
 use std::collections::HashMap;
 
 use candle_core::{DType, Device, Result, Tensor, Var};
+use photomat_core::rng::pseudo_random;
 use photomat_estimator::loss::{
     FeatureExtractor, REFERENCE_GRAM_SCALES, VGG19_CONV_INDICES, gram_loss, l1, l1_downsampled,
     load_vgg19, random_features,
 };
-use photomat_kernels::testing::pseudo_random;
 
 /// Images in [0, 1] (display-encoded), seeded.
 fn image(shape: (usize, usize, usize, usize), seed: u64, dtype: DType) -> Result<Tensor> {

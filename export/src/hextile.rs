@@ -32,8 +32,8 @@
 //! density (an output of 2h × 2w covers 2 × 2 input periods).
 
 use photomat_core::image_io::PlanarImage;
+use photomat_core::rng::SplitMix64;
 use photomat_core::{Error, Result};
-use photomat_kernels::SplitMix64;
 use rayon::prelude::*;
 
 /// √3.

@@ -20,7 +20,7 @@ const SIZE: usize = 16;
 fn material(spec: &str, seed: u64) -> (Brdf, MaterialMaps) {
     let brdf = lookup(spec).unwrap();
     let n = brdf.channels();
-    let raw: Vec<f32> = photomat_kernels::SplitMix64(seed)
+    let raw: Vec<f32> = photomat_core::rng::SplitMix64(seed)
         .normals(n * SIZE * SIZE)
         .into_iter()
         .map(|v| v as f32)

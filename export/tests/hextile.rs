@@ -12,7 +12,7 @@ const R: usize = 32;
 
 /// A smooth periodic image: sums of integer-frequency sinusoids, values in [0, 1].
 fn periodic(channels: usize, seed: u64) -> PlanarImage {
-    let mut rng = photomat_kernels::SplitMix64(seed);
+    let mut rng = photomat_core::rng::SplitMix64(seed);
     let mut data = Vec::new();
     for _ in 0..channels {
         let waves: Vec<[f64; 4]> = (0..4)

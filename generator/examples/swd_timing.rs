@@ -10,8 +10,8 @@
 use std::time::Instant;
 
 use candle_core::{DType, Device};
+use photomat_core::rng::pseudo_random;
 use photomat_generator::swd::{SwdConfig, sliced_wasserstein};
-use photomat_kernels::testing::pseudo_random;
 
 fn main() -> candle_core::Result<()> {
     let arg = |i: usize, default: usize| {

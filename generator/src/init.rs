@@ -14,7 +14,7 @@
 use candle_core::{DType, Device, Result, Shape, Tensor, Var, bail};
 use candle_nn::var_builder::SimpleBackend;
 use candle_nn::{Init, VarBuilder, VarMap};
-use photomat_kernels::SplitMix64;
+use photomat_core::rng::SplitMix64;
 
 /// A [`VarBuilder`] over `vars` whose new variables are initialised from `seed`.
 pub fn seeded_var_builder<'a>(

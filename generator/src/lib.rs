@@ -303,7 +303,7 @@ pub fn seeded_uniform(
     dtype: candle_core::DType,
     device: &candle_core::Device,
 ) -> Result<candle_core::Tensor> {
-    photomat_kernels::testing::pseudo_random(shape, seed, candle_core::DType::F64, device)?
+    photomat_core::rng::pseudo_random(shape, seed, candle_core::DType::F64, device)?
         .affine(3f64.sqrt(), 0.0)?
         .to_dtype(dtype)
 }

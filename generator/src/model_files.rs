@@ -166,7 +166,7 @@ impl GanModel {
         let d = self.config.latent_dim;
         let values: Vec<f32> = seeds
             .iter()
-            .flat_map(|&s| photomat_kernels::SplitMix64(s).normals(d))
+            .flat_map(|&s| photomat_core::rng::SplitMix64(s).normals(d))
             .map(|v| v as f32)
             .collect();
         Tensor::from_vec(values, (seeds.len(), d), &self.device)
@@ -194,7 +194,7 @@ impl GanModel {
             .noise_shapes_at(seeds.len(), size)?;
         let mut streams: Vec<_> = seeds
             .iter()
-            .map(|&s| photomat_kernels::SplitMix64(s ^ NOISE_STREAM_KEY))
+            .map(|&s| photomat_core::rng::SplitMix64(s ^ NOISE_STREAM_KEY))
             .collect();
         shapes
             .iter()
@@ -219,7 +219,7 @@ impl GanModel {
         let (b, c, h, w) = self.generator.synthesis().field_shape(seeds.len(), size)?;
         let values: Vec<f32> = seeds
             .iter()
-            .flat_map(|&s| photomat_kernels::SplitMix64(s ^ FIELD_STREAM_KEY).normals(c * h * w))
+            .flat_map(|&s| photomat_core::rng::SplitMix64(s ^ FIELD_STREAM_KEY).normals(c * h * w))
             .map(|v| v as f32)
             .collect();
         Tensor::from_vec(values, (b, c, h, w), &self.device)

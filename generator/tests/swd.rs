@@ -3,12 +3,11 @@
 //! sensitivity to spectrum and colour structure, determinism and order invariance.
 
 use candle_core::{DType, Device, IndexOp, Tensor};
+use photomat_core::rng::{SplitMix64, pseudo_random};
 use photomat_generator::swd::{
     SwdConfig, laplacian_pyramid, pyr_up, sliced_wasserstein, sliced_wasserstein_descriptors,
     wasserstein_1d,
 };
-use photomat_kernels::SplitMix64;
-use photomat_kernels::testing::pseudo_random;
 
 /// `n` images of white noise uniform in [−1, 1), (n, 3, side, side).
 fn white(n: usize, side: usize, seed: u64) -> Tensor {

@@ -18,7 +18,7 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use candle_core::{DType, Device, Result, Tensor, Var};
-use photomat_kernels::testing::pseudo_random;
+use photomat_core::rng::pseudo_random;
 use photomat_kernels::{bias_leaky_relu_gain, leaky_relu_gain};
 
 #[cfg(feature = "mimalloc")]

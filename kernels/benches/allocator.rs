@@ -26,7 +26,7 @@ use std::time::Instant;
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use mimalloc::MiMalloc;
-use photomat_kernels::testing::pseudo_random;
+use photomat_core::rng::pseudo_random;
 
 /// Serve new blocks from mimalloc (true) or the system allocator (false).
 static USE_MIMALLOC: AtomicBool = AtomicBool::new(false);

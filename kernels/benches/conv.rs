@@ -29,7 +29,7 @@ use std::time::{Duration, Instant};
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use criterion::{Criterion, Throughput};
-use photomat_kernels::testing::pseudo_random;
+use photomat_core::rng::pseudo_random;
 use photomat_kernels::{Conv2dSpec, conv2d, conv2d_reference};
 
 #[cfg(feature = "mimalloc")]

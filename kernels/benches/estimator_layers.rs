@@ -20,7 +20,7 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use candle_core::{DType, Device, Result, Tensor, Var};
-use photomat_kernels::testing::pseudo_random;
+use photomat_core::rng::pseudo_random;
 use photomat_kernels::{Conv2dSpec, conv2d, conv2d_fast_backward};
 
 #[cfg(feature = "mimalloc")]

@@ -335,7 +335,8 @@ mod tests {
     use candle_core::{DType, Device, Var};
 
     use super::*;
-    use crate::testing::{max_abs_diff, pseudo_random};
+    use crate::testing::max_abs_diff;
+    use photomat_core::rng::pseudo_random;
 
     #[test]
     fn leaky_relu_matches_candle_nn_forward() -> Result<()> {

@@ -71,7 +71,7 @@ mod tests {
     use candle_core::{DType, Device, Var};
 
     use super::*;
-    use crate::testing::pseudo_random;
+    use photomat_core::rng::pseudo_random;
 
     /// Reference built element by element: padded (r, c) holds input ((r − top) mod H,
     /// (c − left) mod W).

@@ -766,7 +766,8 @@ mod tests {
     use candle_core::{Device, Var};
 
     use super::*;
-    use crate::testing::{max_abs_diff, pseudo_random};
+    use crate::testing::max_abs_diff;
+    use photomat_core::rng::pseudo_random;
 
     /// (B, C_in, H, W, C_out, k, stride, padding).
     type Case = (usize, usize, usize, usize, usize, usize, usize, usize);

@@ -174,7 +174,8 @@ mod tests {
     use candle_core::{DType, Device, Var};
 
     use super::*;
-    use crate::testing::{max_abs_diff, pseudo_random};
+    use crate::testing::max_abs_diff;
+    use photomat_core::rng::pseudo_random;
 
     /// Gradients of L = Σ g ⊙ conv(x, w) through both backward passes.
     fn grads(fast: bool, x: &Var, w: &Var, g: &Tensor, stride: usize) -> Result<(Tensor, Tensor)> {

@@ -336,7 +336,8 @@ mod tests {
     use candle_core::Var;
 
     use super::*;
-    use crate::testing::{max_abs_diff, pseudo_random};
+    use crate::testing::max_abs_diff;
+    use photomat_core::rng::pseudo_random;
 
     /// A banded matrix with `taps` weights per row starting at `r·step − offset`, wrapped
     /// (circular) or dropped (zero padding): the shapes of StyleGAN2's filters, with

@@ -20,7 +20,8 @@
 //! - [`reference`]: a per-thread switch sending every op to its candle reference composition
 //!   (equivalence tests, same-process baselines).
 //! - [`alloc`]: the global allocator (mimalloc, opt-in feature) and thread count binaries use.
-//! - [`testing`]: seeded pseudo-random tensors and comparisons for tests and benchmarks.
+//! - [`testing`]: tensor comparisons for tests and benchmarks (their seeded inputs come from
+//!   `photomat_core::rng`, a dev-dependency).
 //!
 //! Conventions follow DESIGN §2: NCHW tensors, f32 for training (f64 accepted by every op so
 //! that gradient tests can be tight).
@@ -34,7 +35,6 @@ pub mod fir;
 pub mod modulated_conv;
 pub mod noise_act;
 pub mod reference;
-pub mod splitmix;
 pub mod testing;
 
 pub use activation::{bias_leaky_relu_gain, leaky_relu, leaky_relu_gain};
@@ -45,4 +45,3 @@ pub use fir::{AxisMatrix, separable, separable_reference};
 pub use modulated_conv::{modulated_conv2d, modulated_conv2d_reference};
 pub use noise_act::noise_bias_leaky_relu_gain;
 pub use reference::{reference_ops, with_reference_ops};
-pub use splitmix::SplitMix64;

@@ -207,7 +207,8 @@ mod tests {
 
     use super::*;
     use crate::conv::PaddingMode;
-    use crate::testing::{max_abs_diff, pseudo_random};
+    use crate::testing::max_abs_diff;
+    use photomat_core::rng::pseudo_random;
 
     /// Value and gradients of L = Σ g ⊙ op(x, w, scales) w.r.t. the three operands.
     fn grads(

@@ -179,7 +179,8 @@ mod tests {
     use candle_core::{Device, Var};
 
     use super::*;
-    use crate::testing::{max_abs_diff, pseudo_random};
+    use crate::testing::max_abs_diff;
+    use photomat_core::rng::pseudo_random;
 
     #[test]
     fn fused_epilogue_matches_the_candle_composition_and_its_gradients() -> Result<()> {

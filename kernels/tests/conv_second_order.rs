@@ -9,7 +9,8 @@
 //! sets it first.
 
 use candle_core::{DType, Device, Result, Tensor, Var};
-use photomat_kernels::testing::{max_abs_diff, pseudo_random};
+use photomat_core::rng::pseudo_random;
+use photomat_kernels::testing::max_abs_diff;
 use photomat_kernels::{Conv2dSpec, bias_leaky_relu_gain, conv2d, conv2d_reference};
 
 /// Which implementation D is built from: photomat-kernels' ops, or candle's own.

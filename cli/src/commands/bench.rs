@@ -43,6 +43,7 @@ use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::VarMap;
 use indicatif::{ProgressBar, ProgressStyle};
 use photomat_core::render::to_network_range;
+use photomat_core::rng::{SplitMix64, pseudo_random};
 use photomat_core::{Brdf, FlashGeometry, Highlight, encode_display, lookup, render_radiance_with};
 use photomat_estimator::{EstimatorConfig, EstimatorModel, upsample2x_periodic};
 use photomat_generator::activation::bias_lrelu;
@@ -55,8 +56,7 @@ use photomat_generator::train::loss::{discriminator_loss, generator_loss, r1_los
 use photomat_generator::{
     Discriminator, GanModel, GeneratorConfig, NoiseInput, parameter_count, seeded_var_builder,
 };
-use photomat_kernels::testing::pseudo_random;
-use photomat_kernels::{Conv2dSpec, SplitMix64, conv2d, with_reference_ops};
+use photomat_kernels::{Conv2dSpec, conv2d, with_reference_ops};
 use serde::Serialize;
 
 /// BRDF model of the estimator cases: the paper's configuration (n = 8).

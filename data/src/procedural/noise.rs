@@ -67,18 +67,9 @@ impl PeriodicNoise {
     }
 }
 
-/// SplitMix64 finaliser (Steele et al. 2014): a well-mixed 64-bit hash of `z`.
-pub(crate) fn mix64(z: u64) -> u64 {
-    let mut z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
-/// The top 53 bits of a hash as a uniform value in [0, 1).
-pub(crate) fn unit_f64(h: u64) -> f64 {
-    (h >> 11) as f64 / (1u64 << 53) as f64
-}
+// The SplitMix64 hash (Steele et al. 2014) and its top 53 bits as a uniform value in [0, 1),
+// from the workspace's one seeded generator.
+pub(crate) use photomat_core::rng::{mix64, unit_f64};
 
 /// Quintic fade 6t⁵ − 15t⁴ + 10t³.
 fn fade(t: f64) -> f64 {

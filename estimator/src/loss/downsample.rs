@@ -65,8 +65,7 @@ mod tests {
 
     #[test]
     fn area_downsample_preserves_the_mean_and_rejects_bad_sizes() -> Result<()> {
-        let x =
-            photomat_kernels::testing::pseudo_random((2, 3, 32, 32), 3, DType::F64, &Device::Cpu)?;
+        let x = photomat_core::rng::pseudo_random((2, 3, 32, 32), 3, DType::F64, &Device::Cpu)?;
         let y = area_downsample(&x, 16)?;
         assert_eq!(y.dims(), [2, 3, 16, 16]);
         let (mx, my) = (

@@ -20,7 +20,8 @@
 //! Cost: ≈ 7 kFLOP per input texel forward, about 1/110 of VGG19 up to pool5 (≈ 0.78 MFLOP).
 
 use candle_core::{DType, Device, Result, Tensor};
-use photomat_kernels::{Conv2dSpec, SplitMix64};
+use photomat_core::rng::SplitMix64;
+use photomat_kernels::Conv2dSpec;
 
 use super::extractor::{ConvLayer, PooledConvStack};
 

@@ -8,7 +8,7 @@
 //! ([`photomat_core::Highlight`]), the distribution the GAN's fakes use.
 
 use photomat_core::Highlight;
-use photomat_kernels::SplitMix64;
+use photomat_core::rng::SplitMix64;
 
 /// Golden-ratio increment: spreads consecutive steps over the seed space before mixing.
 const STEP_SPREAD: u64 = 0x9E37_79B9_7F4A_7C15;

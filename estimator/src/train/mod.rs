@@ -3,24 +3,21 @@
 //!
 //! - [`config`]: [`TrainConfig`] (stages, Adam, loss weights, seeds) and [`Stage`];
 //! - [`draws`]: the seeded per-step materials, lights and rolls ([`StepDraws`]);
-//! - [`roll`]: the fine-tune's per-sample wrap-around rolls;
 //! - [`objective`]: the loss of one batch (render of E's maps vs M's relighting);
-//! - [`nan_guard`]: skipping non-finite steps, stopping after repeated ones;
 //! - [`state`]: the run folder's resumable state and the GAN copy;
 //! - [`trainer`]: [`EstimatorTrainer`], one run step by step, checkpoint and resume.
+//!
+//! Adam, the NaN guard, the fine-tune's per-sample rolls and the state-map helpers are the
+//! training layer shared with the GAN trainer (`photomat-train`).
 
 pub mod config;
 pub mod draws;
-pub mod nan_guard;
 pub mod objective;
-pub mod roll;
 pub mod state;
 pub mod trainer;
 
 pub use config::{Stage, TrainConfig};
 pub use draws::StepDraws;
-pub use nan_guard::NanGuard;
 pub use objective::{LossTerms, Objective};
-pub use roll::{roll_maps, roll_per_sample};
 pub use state::{TRAIN_MANIFEST_FILE, TRAIN_STATE_FILE, TrainManifest, copy_gan_model};
 pub use trainer::{EstimatorTrainer, Preview, StepReport};

@@ -21,10 +21,10 @@ use photomat_core::{
     DifferentiableBrdf, FlashGeometry, MaterialMaps, Result, encode_display, render_radiance_with,
 };
 use photomat_generator::Relight;
+use photomat_train::{roll_maps, roll_per_sample};
 
 use super::config::{Stage, TrainConfig};
 use super::draws::StepDraws;
-use super::roll::{roll_maps, roll_per_sample};
 use crate::Estimator;
 use crate::loss::{FeatureExtractor, gram_loss, l1, l1_downsampled};
 

@@ -3,7 +3,7 @@
 //!
 //! - [`TRAIN_STATE_FILE`] (`train_state.safetensors`): E's parameters under `e.`, the Adam
 //!   state under `adam.` (`adam.step`, `adam.m.<name>`, `adam.v.<name>`; see
-//!   `photomat_generator::train::adam`), the number of steps done `train.step` and the stage
+//!   `photomat_train::adam`), the number of steps done `train.step` and the stage
 //!   whose optimiser the moments belong to `train.adam_stage` (0 aligned, 1 fine-tune), in
 //!   one file written atomically, so weights, moments and counters always agree;
 //! - [`TRAIN_MANIFEST_FILE`] (`train.json`): the [`TrainConfig`], BRDF, architecture and the

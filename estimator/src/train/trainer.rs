@@ -5,10 +5,10 @@
 //! Each step draws its batch from the run seed and the step index ([`StepDraws`]): materials
 //! (z and noise of G_ema per material seed, [`GanModel::features_for_seeds`]), one flash per
 //! material, rolls for the fine-tune. The loss is the [`Objective`] of the step's [`Stage`];
-//! Adam (`photomat_generator::train::adam`, PyTorch's update) optimises E's parameters only.
+//! Adam (`photomat_train::adam`, PyTorch's update) optimises E's parameters only.
 //! The fine-tune starts with a fresh optimiser at its own learning rate (moments reset), as
 //! the reference's fine-tune is a new optimisation from the stage-1 weights. A step whose loss
-//! is not finite is skipped ([`NanGuard`]).
+//! is not finite is skipped ([`NanGuard`], shared with the GAN trainer).
 
 use std::path::Path;
 
@@ -17,11 +17,11 @@ use candle_nn::VarMap;
 use photomat_core::checkpoint::{load_vars_checked, save_vars_atomic};
 use photomat_core::{Error, Highlight, MaterialMaps, Result};
 use photomat_generator::GanModel;
-use photomat_generator::train::adam::{Adam, AdamConfig};
+use photomat_train::varmap::{insert_renamed, insert_var};
+use photomat_train::{Adam, AdamConfig, NanGuard};
 
 use super::config::{Stage, TrainConfig};
 use super::draws::StepDraws;
-use super::nan_guard::NanGuard;
 use super::objective::Objective;
 use super::state::{TRAIN_STATE_FILE, TrainManifest};
 use crate::EstimatorModel;
@@ -108,7 +108,7 @@ impl EstimatorTrainer {
         }
         let stage = config.stage_at(0);
         let adam = new_adam(&model, &config, stage)?;
-        let guard = NanGuard::new(config.max_nan_steps);
+        let guard = NanGuard::new(config.max_nan_steps as usize, DIVERGED_ADVICE);
         Ok(Self {
             gan,
             model,
@@ -147,7 +147,8 @@ impl EstimatorTrainer {
         let (l1, gram, total) = (value(&terms.l1)?, value(&terms.gram)?, value(&terms.total)?);
         let apply = self
             .guard
-            .check(index + 1, &[("L1", l1), ("Gram", gram), ("total", total)])?;
+            .allow_terms(&[("L1", l1), ("Gram", gram), ("total", total)]);
+        self.guard.end_step(index + 1)?;
         if apply {
             self.adam.step(&terms.total.backward()?)?;
         }
@@ -294,17 +295,10 @@ impl EstimatorTrainer {
     /// variables are the live ones (loading into it restores the run).
     fn state_map(&self, step: Var, stage: Var) -> VarMap {
         let map = VarMap::new();
-        {
-            let mut data = map.data().lock().expect("VarMap lock poisoned");
-            for (name, var) in self.model.vars().data().lock().expect("lock").iter() {
-                data.insert(format!("e.{name}"), var.clone());
-            }
-            for (name, var) in self.adam.state().data().lock().expect("lock").iter() {
-                data.insert(format!("adam.{name}"), var.clone());
-            }
-            data.insert("train.step".into(), step);
-            data.insert("train.adam_stage".into(), stage);
-        }
+        insert_renamed(&map, self.model.vars(), "", "e.");
+        insert_renamed(&map, self.adam.state(), "", "adam.");
+        insert_var(&map, "train.step", &step);
+        insert_var(&map, "train.adam_stage", &stage);
         map
     }
 }
@@ -333,6 +327,9 @@ fn stage_code(stage: Stage) -> f64 {
     }
 }
 
+/// How the error of a run stopped by the [`NanGuard`] ends.
+const DIVERGED_ADVICE: &str = "lower the learning rate or check the GAN model";
+
 /// Adam's ε: PyTorch's default, which the reference keeps.
 const ADAM_EPS: f64 = 1e-8;
 
@@ -344,5 +341,6 @@ fn new_adam(model: &EstimatorModel, config: &TrainConfig, stage: Stage) -> Resul
         beta2: config.beta2,
         eps: ADAM_EPS,
     };
-    Ok(Adam::for_varmap(model.vars(), "", cfg)?)
+    // E has no buffers: every variable is trained.
+    Ok(Adam::for_varmap(model.vars(), |_| true, cfg)?)
 }

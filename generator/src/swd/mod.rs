@@ -44,7 +44,7 @@
 //! [`model`] applies the metric to a GAN model and a data set.
 
 use candle_core::{DType, Device, Result, Tensor, bail};
-use photomat_kernels::SplitMix64;
+use photomat_core::rng::SplitMix64;
 use rayon::prelude::*;
 
 pub mod model;

@@ -10,7 +10,7 @@
 //! Every draw derives from `seed`, so a model, data set, count and seed give one value.
 
 use candle_core::{Device, Result, Tensor, bail};
-use photomat_kernels::SplitMix64;
+use photomat_core::rng::SplitMix64;
 
 use super::{SwdConfig, SwdReport, sliced_wasserstein};
 use crate::GanModel;

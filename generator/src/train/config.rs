@@ -10,9 +10,9 @@
 use std::path::PathBuf;
 
 use candle_core::{Result, bail};
+use photomat_train::AdamConfig;
 use serde::{Deserialize, Serialize};
 
-use super::adam::AdamConfig;
 use crate::GeneratorConfig;
 
 /// StyleGAN2's R1 weight heuristic: γ = 0.0002 · R² / batch (StyleGAN2-ADA `train.py`, `auto`

@@ -14,7 +14,7 @@
 //! gradient is reported as an error.
 
 use candle_core::{DType, Device, Result, Tensor, Var, bail};
-use photomat_kernels::SplitMix64;
+use photomat_core::rng::SplitMix64;
 
 /// Decay of the running mean path length (StyleGAN2 `pl_decay`).
 pub const PL_DECAY: f64 = 0.01;

@@ -2,9 +2,10 @@
 //!
 //! - [`STATE_FILE`] (`train_state.safetensors`): every variable a step reads or writes — G and
 //!   M (`g.*`, `m.*`, including the `g.mapping.w_avg` buffer), G_ema (`g_ema.*`), D (`d.*`),
-//!   both optimisers' moments and step counts (`opt_g.*`, `opt_d.*`, [`super::adam`]) and the
-//!   trainer's counters (`trainer.counters` = [steps done, consecutive skipped steps]) — saved
-//!   atomically with [`photomat_core::checkpoint::save_vars_atomic`];
+//!   both optimisers' moments and step counts (`opt_g.*`, `opt_d.*`,
+//!   [`photomat_train::adam`]) and the trainer's counters (`trainer.counters` = [steps done,
+//!   consecutive skipped steps]) — saved atomically with
+//!   [`photomat_core::checkpoint::save_vars_atomic`];
 //! - [`CONFIG_FILE`] (`train.json`): the full [`TrainConfig`].
 //!
 //! Every random draw of a step is a function of the run seed and the step
@@ -15,7 +16,7 @@
 
 use std::path::{Path, PathBuf};
 
-use candle_core::{Result, Var};
+use candle_core::Result;
 use candle_nn::VarMap;
 use photomat_core::image_io::write_atomic;
 
@@ -25,25 +26,6 @@ use super::config::{TrainConfig, config_differences};
 pub const STATE_FILE: &str = "train_state.safetensors";
 /// The configuration file in a run folder.
 pub const CONFIG_FILE: &str = "train.json";
-
-/// Inserts the variables of `source` whose names start with `from` into `target`, renamed
-/// with `to` in place of `from`; the `Var`s are shared, not copied.
-pub fn insert_renamed(target: &VarMap, source: &VarMap, from: &str, to: &str) {
-    let src = source.data().lock().expect("VarMap lock poisoned");
-    let mut dst = target.data().lock().expect("VarMap lock poisoned");
-    for (name, var) in src.iter().filter(|(n, _)| n.starts_with(from)) {
-        dst.insert(format!("{to}{}", &name[from.len()..]), var.clone());
-    }
-}
-
-/// Inserts one variable under `name`.
-pub fn insert_var(target: &VarMap, name: &str, var: &Var) {
-    target
-        .data()
-        .lock()
-        .expect("VarMap lock poisoned")
-        .insert(name.to_string(), var.clone());
-}
 
 /// Reads `dir/train.json`; errors name the file.
 pub fn read_config(dir: &Path) -> Result<TrainConfig> {

@@ -7,7 +7,7 @@
 //! index (e.g. the batch item), each through one SplitMix64 round (a bijective mixer: distinct
 //! inputs give well-spread, distinct states).
 
-use photomat_kernels::SplitMix64;
+use photomat_core::rng::SplitMix64;
 
 /// What a random draw is for. Each phase of a step (G's, D's) has its own latents, noise,
 /// lights and rolls, as in StyleGAN2-ADA, where every phase draws its own z.

@@ -3,9 +3,9 @@
 //!
 //! 1. **G step** — latents z (with style mixing, probability 0.9, one cut-off per batch drawn
 //!    in 1 … num_ws − 1), seeded noise, G → F; in tileable mode F is rolled per sample
-//!    ([`super::roll`]); lights drawn like the real crops' ([`TrainingData`]) give ω; M(F, ω) →
-//!    image; loss `softplus(−D(image, ω))`; Adam on G and M. The tracked `w_avg` moves
-//!    towards the batch's mean w.
+//!    ([`photomat_train::roll`]); lights drawn like the real crops' ([`TrainingData`]) give
+//!    ω; M(F, ω) → image; loss `softplus(−D(image, ω))`; Adam on G and M. The tracked `w_avg`
+//!    moves towards the batch's mean w.
 //!    A spatial G (training on patches, [`TrainConfig::patches`]) makes each fake at
 //!    R + margin cells from its own local latent field and D sees a random R×R window of it
 //!    (the roll, then the top-left window).
@@ -19,7 +19,7 @@
 //!    is shared by G and G_ema: the inference model pairs G_ema with the trained M (whose lr
 //!    multiplier of 0.01 already makes it move slowly).
 //!
-//! Any phase whose loss or gradient is not finite is skipped ([`super::nan_guard`]).
+//! Any phase whose loss or gradient is not finite is skipped ([`photomat_train::nan_guard`]).
 //!
 //! Every random draw comes from a seed of (run seed, step, purpose) ([`super::streams`]):
 //! latents via [`GanModel::latents`], noise via [`GanModel::noise_images`] (local fields via
@@ -39,20 +39,19 @@ use std::time::Instant;
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use candle_nn::VarMap;
-use photomat_kernels::SplitMix64;
+use photomat_core::rng::SplitMix64;
+use photomat_train::varmap::{insert_renamed, insert_var};
+use photomat_train::{Adam, NanGuard, gradients_finite, roll_offsets, roll_per_sample};
 
-use super::adam::Adam;
 use super::config::TrainConfig;
 use super::data::{TrainingData, omega_for_placements};
 use super::ema::{Ema, ema_beta};
 use super::loss::{discriminator_loss, generator_loss, r1_loss};
-use super::nan_guard::{NanGuard, gradients_finite};
 use super::path_length::{PL_BATCH_SHRINK, PathLengthMean, path_lengths, pl_loss, pl_noise};
-use super::roll::{roll_offsets, roll_per_sample};
-use super::state::{insert_renamed, insert_var, load_state, save_state};
+use super::state::{load_state, save_state};
 use super::streams::{Stream, stream_seed, stream_seeds};
 use crate::model_files::G_PREFIX;
-use crate::{Discriminator, GanModel, NoiseInput, mix_styles, seeded_var_builder};
+use crate::{Discriminator, GanModel, NoiseInput, is_buffer, mix_styles, seeded_var_builder};
 
 /// Sets `CANDLE_GRAD_DO_NOT_DETACH=1` so that candle keeps the graph of gradients (needed by
 /// the R1 penalty's double backward). Call it at the start of the program, before any thread
@@ -206,8 +205,9 @@ impl Trainer {
             cfg,
             seeded_var_builder(&d_vars, config.seed, DType::F32, device),
         )?;
-        let opt_g = Adam::for_varmap(model.vars(), "", config.adam_g())?;
-        let opt_d = Adam::for_varmap(&d_vars, "", config.adam_d())?;
+        let trainable = |name: &str| !is_buffer(name);
+        let opt_g = Adam::for_varmap(model.vars(), trainable, config.adam_g())?;
+        let opt_d = Adam::for_varmap(&d_vars, trainable, config.adam_d())?;
         let counters = Var::zeros(2, DType::F64, device)?;
         let state = VarMap::new();
         insert_renamed(&state, model.vars(), "", "");
@@ -225,7 +225,7 @@ impl Trainer {
             None
         };
         Ok(Self {
-            guard: NanGuard::new(config.nan_limit),
+            guard: NanGuard::new(config.nan_limit, DIVERGED_ADVICE),
             pl_mean,
             config,
             device: device.clone(),
@@ -503,6 +503,10 @@ impl Trainer {
         })
     }
 }
+
+/// How the error of a diverged run ends (after the step and the non-finite losses).
+const DIVERGED_ADVICE: &str =
+    "the run has diverged — resume from the last checkpoint with a lower --lr";
 
 /// A scalar tensor's value as f64.
 fn scalar(t: &Tensor) -> Result<f64> {

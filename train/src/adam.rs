@@ -4,7 +4,7 @@
 //! [`photomat_core::checkpoint::load_vars_checked`].
 //!
 //! The update is PyTorch's `torch.optim.Adam` (the optimiser of the StyleGAN2-ADA reference
-//! code, DESIGN §4), in the variable's dtype:
+//! code that PhotoMat builds on, and of PhotoMat's estimator), in the variable's dtype:
 //!
 //! ```text
 //! t ← t + 1
@@ -30,7 +30,7 @@
 //!
 //! ```no_run
 //! use candle_core::{DType, Device, Var};
-//! use photomat_generator::train::adam::{Adam, AdamConfig};
+//! use photomat_train::adam::{Adam, AdamConfig};
 //!
 //! # fn main() -> candle_core::Result<()> {
 //! let w = Var::zeros((3,), DType::F32, &Device::Cpu)?;
@@ -47,13 +47,13 @@ use candle_core::backprop::GradStore;
 use candle_core::{DType, Result, Tensor, Var, bail};
 use candle_nn::VarMap;
 
-use crate::checkpoint::is_buffer;
+use crate::varmap::{lock, sorted_vars};
 
 /// Name of the step counter in [`Adam::state`].
 pub const STEP_NAME: &str = "step";
 
-/// Hyper-parameters of [`Adam`]. The defaults are the StyleGAN2 GAN setting of DESIGN §4
-/// (lr 0.0025, β = (0, 0.99), ε = 1e-8), without the lazy-regularisation correction.
+/// Hyper-parameters of [`Adam`]. The defaults are StyleGAN2's GAN setting at 256² (Karras et
+/// al. 2020; lr 0.0025, β = (0, 0.99), ε = 1e-8), without the lazy-regularisation correction.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AdamConfig {
@@ -138,7 +138,7 @@ impl Adam {
         let mut names = Vec::with_capacity(vars.len());
         let mut slots = Vec::with_capacity(vars.len());
         {
-            let mut data = state.data().lock().expect("VarMap lock poisoned");
+            let mut data = lock(&state);
             data.insert(STEP_NAME.to_string(), step.clone());
             for (name, var) in vars {
                 let m = Var::zeros(var.shape(), var.dtype(), var.device())?;
@@ -162,23 +162,19 @@ impl Adam {
         })
     }
 
-    /// An optimiser over every trainable variable of `vars` (all but buffers such as
-    /// `w_avg`, see [`crate::is_buffer`]) whose name starts with `prefix` (`""`: all), sorted
-    /// by name.
-    pub fn for_varmap(vars: &VarMap, prefix: &str, config: AdamConfig) -> Result<Self> {
-        let mut named: Vec<(String, Var)> = {
-            let data = vars.data().lock().expect("VarMap lock poisoned");
-            data.iter()
-                .filter(|(n, _)| n.starts_with(prefix) && !is_buffer(n))
-                .map(|(n, v)| (n.clone(), v.clone()))
-                .collect()
-        };
-        named.sort_by(|a, b| a.0.cmp(&b.0));
-        Self::new(named, config)
+    /// An optimiser over the variables of `vars` whose names `trainable` accepts, sorted by
+    /// name. Buffers updated outside the optimiser (the generator's tracked `w_avg`) are the
+    /// caller's to leave out: `|_| true` optimises the whole map.
+    pub fn for_varmap(
+        vars: &VarMap,
+        trainable: impl Fn(&str) -> bool,
+        config: AdamConfig,
+    ) -> Result<Self> {
+        Self::new(sorted_vars(vars, trainable), config)
     }
 
     /// Applies one update from the gradients in `grads`; variables without a gradient are
-    /// skipped. Gradients are not checked for finiteness here (see the trainer's NaN guard).
+    /// skipped. Gradients are not checked for finiteness here (see [`crate::nan_guard`]).
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
         let t = self.step_count() + 1;
         let AdamConfig {
