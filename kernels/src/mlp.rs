@@ -576,7 +576,7 @@ fn mask<T: WithDType>(x: &mut [T], h: &[T], act: MlpActivation) {
     let (p, n) = (T::from_f64(act.gain), T::from_f64(act.gain * act.slope));
     let zero = T::zero();
     for (x, &h) in x.iter_mut().zip(h) {
-        *x = *x * if h > zero { p } else { n };
+        *x *= if h > zero { p } else { n };
     }
 }
 
@@ -748,7 +748,6 @@ impl Forward {
             );
             None
         };
-        drop(scatter);
         Ok((T::to_cpu_storage_owned(out), hidden))
     }
 
@@ -983,7 +982,7 @@ impl Backward {
                 );
                 for row in cur.chunks_exact(outw) {
                     for (a, &v) in t.acc[bo..bo + outw].iter_mut().zip(row) {
-                        *a = *a + v;
+                        *a += v;
                     }
                 }
                 // dhᵢ₋₁ = dzᵢ·Ŵᵢ, then the activation's derivative.
@@ -1041,12 +1040,11 @@ impl Backward {
                 || vec![T::zero(); np],
                 |mut a, b| {
                     for (a, b) in a.iter_mut().zip(b) {
-                        *a = *a + b;
+                        *a += b;
                     }
                     a
                 },
             );
-        drop(scatter);
         let dparams = &mut out[total_in..];
         for i in 0..l {
             let (wo, bo) = net.offsets(i);
@@ -1278,12 +1276,11 @@ impl SecondOrder {
                 || vec![T::zero(); np],
                 |mut a, b| {
                     for (a, b) in a.iter_mut().zip(b) {
-                        *a = *a + b;
+                        *a += b;
                     }
                     a
                 },
             );
-        drop(scatter);
         let dparams = &mut out[io.output_len()..];
         for i in 0..l {
             let (wo, _) = net.offsets(i);
