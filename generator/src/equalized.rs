@@ -107,6 +107,17 @@ impl EqualizedLinear {
         }
     }
 
+    /// The layer as photomat-kernels' fused per-texel MLP takes it (stored weight and bias
+    /// with their run-time gains); `None` for a layer without a bias.
+    pub fn mlp_layer(&self) -> Option<photomat_kernels::MlpLayer<'_>> {
+        Some(photomat_kernels::MlpLayer {
+            weight: &self.weight,
+            bias: self.bias.as_ref()?,
+            weight_gain: self.weight_gain,
+            bias_gain: self.bias_gain,
+        })
+    }
+
     /// Number of input features.
     pub fn in_features(&self) -> usize {
         self.weight.dims()[1]

@@ -8,9 +8,12 @@
 //! clamped, so the discriminator's gradient never vanishes at the range ends; clamp only for
 //! display. Every layer is an equalised-lr [`EqualizedLinear`] with lr multiplier 0.01.
 //!
-//! Implemented as matrix products on (B·H·W, C) rows (one row per texel), not as 1×1 convs:
-//! DESIGN §6 measured this MLP at 3× PyTorch's CPU time as row matmuls with the activation of
-//! [`crate::activation`], 13× as 1×1 convs.
+//! On the CPU, M runs as photomat-kernels' fused per-texel MLP
+//! ([`photomat_kernels::per_texel_mlp`]: texel rows in cache-sized blocks, one `gemm` per layer,
+//! NCHW inputs and output without a concatenated copy; its backward is differentiable once
+//! more for path-length regularisation). Inside [`photomat_kernels::with_reference_ops`] (and
+//! on other devices) it is the candle composition: matrix products on (B·H·W, C) rows with the
+//! activation of [`crate::activation`] (`docs/benchmarks.md` compares the two).
 //!
 //! Parameter names under `vb`: `fc{i}.weight`, `fc{i}.bias`, i = 0 … 7.
 
@@ -18,12 +21,20 @@ use candle_core::{Result, Tensor, bail};
 use candle_nn::VarBuilder;
 
 use crate::GeneratorConfig;
+use crate::activation::{LRELU_GAIN, LRELU_SLOPE};
 use crate::equalized::{EqualizedLinear, LinearConfig, equalized_linear};
 
 /// Channels of the per-texel light direction ω.
 pub const OMEGA_CHANNELS: usize = 3;
 /// Channels of M's output (RGB).
 pub const RGB_CHANNELS: usize = 3;
+
+/// M's activation after every layer but the last: StyleGAN2's `lrelu` (LeakyReLU 0.2 × √2),
+/// as [`crate::activation`].
+const ACTIVATION: photomat_kernels::MlpActivation = photomat_kernels::MlpActivation {
+    slope: LRELU_SLOPE,
+    gain: LRELU_GAIN,
+};
 
 /// The relighting MLP M.
 #[derive(Debug, Clone)]
@@ -63,6 +74,14 @@ impl Relight {
         })
     }
 
+    /// The layers for the fused op, unless the reference composition is asked for.
+    fn fused_layers(&self) -> Option<Vec<photomat_kernels::MlpLayer<'_>>> {
+        if photomat_kernels::reference_ops() {
+            return None;
+        }
+        self.layers.iter().map(EqualizedLinear::mlp_layer).collect()
+    }
+
     /// M on rows: one texel per row.
     ///
     /// # Shapes
@@ -74,6 +93,9 @@ impl Relight {
                 "relight: rows of {c} channels, expected {} features + {OMEGA_CHANNELS} for ω",
                 self.feature_channels
             );
+        }
+        if let Some(layers) = self.fused_layers() {
+            return photomat_kernels::per_texel_mlp_rows(rows, &layers, ACTIVATION);
         }
         let last = self.layers.len() - 1;
         let mut x = rows.clone();
@@ -106,6 +128,9 @@ impl Relight {
                 omega.dims(),
                 features.dims()
             );
+        }
+        if let Some(layers) = self.fused_layers() {
+            return photomat_kernels::per_texel_mlp(features, omega, &layers, ACTIVATION);
         }
         let rows = Tensor::cat(&[features, omega], 1)?
             .permute((0, 2, 3, 1))?

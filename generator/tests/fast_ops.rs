@@ -2,13 +2,14 @@
 //! fused bias + LeakyReLU) compute the same values and parameter gradients as on plain candle
 //! ops ([`photomat_kernels::with_reference_ops`], the implementation before the kernels were
 //! used), for the same seeded weights, in f64: in zero-padded and tileable mode, for G + M
-//! and for D.
+//! and for D, and for M alone (photomat-kernels' fused per-texel MLP) on texel counts that
+//! are not multiples of its row block.
 
 mod common;
 
 use anyhow::Result;
 use candle_core::{DType, Device, Tensor};
-use candle_nn::VarMap;
+use candle_nn::{Init, VarMap};
 use common::{compare, config, perturb, seeded_noise, value_and_grads};
 use photomat_generator::{
     Discriminator, Generator, NoiseInput, Relight, seeded_uniform, seeded_var_builder,
@@ -65,4 +66,45 @@ fn discriminator_on_kernels_equals_plain_candle() -> Result<()> {
     let reference = with_reference_ops(run)?;
     // Same argument as for G: other summation orders only.
     compare("D", fast, reference, 1e-9)
+}
+
+#[test]
+fn relight_mlp_fused_equals_plain_candle_on_odd_sizes() -> Result<()> {
+    let dev = Device::Cpu;
+    let cfg = config(false);
+    let c = cfg.feature_channels;
+    // 17·23 = 391 texels per image (one full 256-row block and a partial one), batch 3; and a
+    // single texel.
+    for (b, h, w) in [(3, 17, 23), (1, 1, 1)] {
+        let vars = VarMap::new();
+        let vb = seeded_var_builder(&vars, 11, DType::F64, &dev);
+        let m = Relight::new(&cfg, vb.pp("m"))?;
+        perturb(&vars)?;
+        // F and ω as variables too, so that their gradients are compared.
+        let uniform = Init::Uniform { lo: -1.0, up: 1.0 };
+        let f = vb.get_with_hints((b, c, h, w), "in.features", uniform)?;
+        let omega = vb.get_with_hints((b, 3, h, w), "in.omega", uniform)?;
+        let weights = seeded_uniform((b, 3, h, w), 12, DType::F64, &dev)?;
+        let run = || -> Result<(f64, Vec<(String, Tensor)>)> {
+            let rgb = m.forward(&f, &omega)?;
+            // The row form too, on the same texels in row order.
+            let rows = Tensor::cat(&[&f, &omega], 1)?
+                .permute((0, 2, 3, 1))?
+                .contiguous()?
+                .reshape((b * h * w, c + 3))?;
+            let rgb_rows = m.forward_rows(&rows)?;
+            let loss = ((rgb * &weights)?.sum_all()? + rgb_rows.sqr()?.mean_all()?)?;
+            value_and_grads(&loss, &vars)
+        };
+        let fast = run()?;
+        let reference = with_reference_ops(run)?;
+        assert_eq!(
+            fast.1.len(),
+            2 + 2 * cfg.relight_layers,
+            "F, ω, every weight and bias"
+        );
+        // f64, the same products summed in other orders through 8 layers: ≲ 1e-13 relative.
+        compare(&format!("M {b}x{h}x{w}"), fast, reference, 1e-9)?;
+    }
+    Ok(())
 }

@@ -32,6 +32,7 @@ pub mod circular_pad;
 pub mod conv;
 pub mod conv_grad;
 pub mod fir;
+pub mod mlp;
 pub mod modulated_conv;
 pub mod noise_act;
 pub mod reference;
@@ -42,6 +43,10 @@ pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use conv::{Conv2dSpec, PaddingMode, conv2d, conv2d_reference};
 pub use conv_grad::conv2d_fast_backward;
 pub use fir::{AxisMatrix, separable, separable_reference};
+pub use mlp::{
+    MlpActivation, MlpLayer, per_texel_mlp, per_texel_mlp_reference, per_texel_mlp_rows,
+    per_texel_mlp_rows_reference,
+};
 pub use modulated_conv::{modulated_conv2d, modulated_conv2d_reference};
 pub use noise_act::noise_bias_leaky_relu_gain;
 pub use reference::{reference_ops, with_reference_ops};
