@@ -4,7 +4,7 @@
 //! `count` fakes are relit samples of G and M: each from its own seed (latent and noise,
 //! [`GanModel::features_for_seeds`], ψ = 1, i.e. no truncation), under a light drawn from the
 //! data set's light distribution ([`TrainingData::fake_highlights`]: the crops' highlight
-//! positions, DESIGN §4), with per-texel ω ([`omega_for`]). `count` reals are crops drawn as
+//! positions, DESIGN §4), with per-texel ω ([`FlashGeometry::omega_for`]). `count` reals are crops drawn as
 //! the trainer draws them ([`TrainingData::reals`]). Both sets are in the encoded space
 //! [−1, 1]; M's output is not clamped (clamping would hide overshoot the metric should see).
 //! Every draw derives from `seed`, so a model, data set, count and seed give one value.
@@ -14,7 +14,8 @@ use photomat_kernels::SplitMix64;
 
 use super::{SwdConfig, SwdReport, sliced_wasserstein};
 use crate::GanModel;
-use crate::train::data::{TrainingData, omega_for};
+use crate::train::data::TrainingData;
+use photomat_core::FlashGeometry;
 
 /// Images generated or loaded per batch: bounds memory (G's activations at 256² are large)
 /// while keeping the matrix products efficient.
@@ -62,7 +63,8 @@ pub fn relit_samples(
         .enumerate()
     {
         let features = model.features_for_seeds(seeds, 1.0)?;
-        let omega = omega_for(lights, r, model.device())?;
+        let omega = FlashGeometry::omega_for(lights, r, model.device())
+            .map_err(candle_core::Error::wrap)?;
         batches.push(model.relight().forward(&features, &omega)?);
         progress((i * EVAL_BATCH + seeds.len()).min(count));
     }

@@ -8,8 +8,8 @@
 
 use std::path::Path;
 
-use candle_core::{DType, Device, Result, Tensor, bail};
-use photomat_core::{FlashGeometry, Highlight};
+use candle_core::{Device, Result, Tensor, bail};
+use photomat_core::Highlight;
 use photomat_data::dataset::FlashDataset;
 use photomat_data::sampler::{CropSampler, LightSampler};
 
@@ -30,16 +30,6 @@ pub trait TrainingData {
     /// `batch` light positions for generated samples, drawn from `seed`, in the plane
     /// coordinates of an R×R sample.
     fn fake_highlights(&self, batch: usize, seed: u64) -> Result<Vec<Highlight>>;
-}
-
-/// The per-texel ω maps of `highlights` over R×R samples.
-///
-/// # Shapes
-/// → (highlights.len(), 3, R, R), f32.
-pub fn omega_for(highlights: &[Highlight], size: usize, device: &Device) -> Result<Tensor> {
-    Ok(FlashGeometry::new(highlights, size, DType::F32, device)
-        .map_err(candle_core::Error::wrap)?
-        .omega)
 }
 
 /// A prepared flash-photo data set as [`TrainingData`] for R×R models.

@@ -7,10 +7,10 @@
 //! show the same materials and crops.
 
 use candle_core::{Device, Result, Tensor};
-use photomat_core::Highlight;
 use photomat_core::image_io::{PlanarImage, contact_sheet};
+use photomat_core::{FlashGeometry, Highlight};
 
-use super::data::{TrainingData, omega_for};
+use super::data::TrainingData;
 use super::streams::{Stream, stream_seed, stream_seeds};
 use crate::GanModel;
 
@@ -56,7 +56,8 @@ pub fn sample_grid(
     let features = model.features_for_seeds(&seeds, 1.0)?;
     let mut per_light = Vec::with_capacity(SAMPLE_LIGHTS.len());
     for &(x, y) in &SAMPLE_LIGHTS {
-        let omega = omega_for(&[Highlight::new(x, y); SAMPLE_ROWS], r, device)?;
+        let omega = FlashGeometry::omega_for(&[Highlight::new(x, y); SAMPLE_ROWS], r, device)
+            .map_err(candle_core::Error::wrap)?;
         per_light.push(display_tiles(&model.relight().forward(&features, &omega)?)?);
     }
     let reals = data.reals(

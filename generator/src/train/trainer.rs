@@ -34,11 +34,12 @@ use std::time::Instant;
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use candle_nn::VarMap;
+use photomat_core::FlashGeometry;
 use photomat_kernels::SplitMix64;
 
 use super::adam::Adam;
 use super::config::TrainConfig;
-use super::data::{TrainingData, omega_for};
+use super::data::TrainingData;
 use super::ema::{Ema, ema_beta};
 use super::loss::{discriminator_loss, generator_loss, r1_loss};
 use super::nan_guard::{NanGuard, gradients_finite};
@@ -340,7 +341,8 @@ impl Trainer {
             features = roll_per_sample(&features, &offsets)?;
         }
         let highlights = data.fake_highlights(b, stream_seed(seed, step, lights, 0))?;
-        let omega = omega_for(&highlights, cfg.resolution, &self.device)?;
+        let omega = FlashGeometry::omega_for(&highlights, cfg.resolution, &self.device)
+            .map_err(candle_core::Error::wrap)?;
         let images = self.model.relight().forward(&features, &omega)?;
         Ok(Fakes { images, omega, w })
     }
