@@ -19,6 +19,7 @@
 pub mod adam;
 pub mod config;
 pub mod data;
+pub mod driver;
 pub mod ema;
 pub mod log;
 pub mod loss;
@@ -33,4 +34,5 @@ pub mod trainer;
 pub use adam::{Adam, AdamConfig};
 pub use config::TrainConfig;
 pub use data::{DatasetSource, RealBatch, TrainingData};
+pub use driver::{Cadence, GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan};
 pub use trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
