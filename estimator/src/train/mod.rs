@@ -11,6 +11,7 @@
 
 pub mod config;
 pub mod draws;
+pub mod driver;
 pub mod nan_guard;
 pub mod objective;
 pub mod roll;
@@ -19,6 +20,7 @@ pub mod trainer;
 
 pub use config::{Stage, TrainConfig};
 pub use draws::StepDraws;
+pub use driver::{Cadence, EstimatorOutcome, EstimatorSettings, EstimatorTraining};
 pub use nan_guard::NanGuard;
 pub use objective::{LossTerms, Objective};
 pub use roll::{roll_maps, roll_per_sample};
