@@ -41,10 +41,12 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 
-// Link the built-in plugins: a crate that only lists them in Cargo.toml sees none (DESIGN §3).
+// Link the built-in plugins: a crate that only lists them in Cargo.toml sees none
+// (`docs/conventions.md`).
 use photomat_brdfs as _;
 
 mod commands;
+mod common;
 
 /// Learn material generators from flash photos and decode them into analytic SVBRDF maps.
 #[derive(Debug, Parser)]

@@ -1,4 +1,5 @@
-//! Flash-plane geometry (DESIGN §2, the paper's §"Dataset collection" set-up).
+//! Flash-plane geometry (`docs/conventions.md`, "Geometry and radiometry"; the paper's
+//! §"Dataset collection" set-up).
 //!
 //! The material is a square of side [`PLANE_SIDE`] = 1 centred at the origin in z = 0, normal
 //! +z, image row 0 at the top (+y). Camera and flash are collocated at `(lx, ly, 1)`: the
@@ -46,7 +47,7 @@ impl Highlight {
     }
 
     /// [`Self::from_pixel`] for an R×R image covering a centred square of side `side` (a whole
-    /// flash photo spans side 2: its H×H training crops are unit squares, DESIGN §4).
+    /// flash photo spans side 2: its H×H training crops are unit squares).
     pub fn from_pixel_on(row: f64, col: f64, size: usize, side: f64) -> Self {
         let r = size as f64;
         Self::new((col / r - 0.5) * side, (0.5 - row / r) * side)
@@ -98,6 +99,27 @@ impl FlashGeometry {
         device: &Device,
     ) -> Result<Self> {
         Self::with_side(highlights, size, PLANE_SIDE, dtype, device)
+    }
+
+    /// The f32 ω maps of `highlights` over R×R samples of the unit square: what the
+    /// relighting MLP M reads next to the features F.
+    ///
+    /// # Shapes
+    /// → (highlights.len(), 3, R, R), f32.
+    pub fn omega_for(highlights: &[Highlight], size: usize, device: &Device) -> Result<Tensor> {
+        Ok(Self::new(highlights, size, DType::F32, device)?.omega)
+    }
+
+    /// The geometry of lights `first .. first + n`: the same values as building it for those
+    /// highlights alone, so a set built once serves light groups of any size.
+    ///
+    /// # Shapes
+    /// (B, ·, R, R) → (n, ·, R, R).
+    pub fn narrow(&self, first: usize, n: usize) -> Result<Self> {
+        Ok(Self {
+            omega: self.omega.narrow(0, first, n)?,
+            inv_dist2: self.inv_dist2.narrow(0, first, n)?,
+        })
     }
 
     /// Geometry over an R×R grid covering a centred square of side `side`, flash still at

@@ -1,5 +1,5 @@
-//! Image files for photomat: planar f32 images ↔ 8/16-bit PNG and float32 EXR, contact
-//! sheets, and atomic file writes.
+//! Image files for photomat: planar f32 images ↔ 8/16-bit PNG and float32 EXR, and atomic
+//! file writes. Sheets of images (grids, contact sheets) live in [`crate::sheet`].
 //!
 //! [`PlanarImage`] is the exchange type: a CHW `Vec<f32>` that converts to and from NCHW
 //! tensors. PNG values are the *stored* values in [0, 1] (whatever encoding the caller chose:
@@ -26,6 +26,9 @@ use candle_core::{DType, Device, Tensor};
 use image::{DynamicImage, ImageBuffer, ImageDecoder, ImageFormat, ImageReader};
 
 use crate::{Error, Result};
+
+/// The sheet layouts, re-exported under their former path.
+pub use crate::sheet::{CONTACT_SHEET_GAP, contact_sheet, contact_sheet_grid};
 
 /// Bit depth of a written PNG. Serialised as the number 8 or 16.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
@@ -387,86 +390,9 @@ pub fn read_exr(path: &Path) -> Result<PlanarImage> {
     PlanarImage::new(found.len(), height, width, data).map_err(|e| Error::file(path, e))
 }
 
-/// Columns and rows of a contact sheet of `n` tiles: ⌈√n⌉ columns, as many rows as needed.
-pub fn contact_sheet_grid(n: usize) -> (usize, usize) {
-    let columns = (1..=n.max(1)).find(|c| c * c >= n).unwrap_or(1);
-    (columns, n.div_ceil(columns).max(1))
-}
-
-/// Gap between contact-sheet tiles, in pixels.
-pub const CONTACT_SHEET_GAP: usize = 4;
-
-/// Tiles of equal size and channel count laid out row by row on a [`contact_sheet_grid`],
-/// [`CONTACT_SHEET_GAP`] pixels of `background` between them (no outer border).
-///
-/// # Shapes
-/// n tiles of (C, h, w) → (C, rows·h + (rows−1)·gap, cols·w + (cols−1)·gap).
-pub fn contact_sheet(tiles: &[PlanarImage], background: f32) -> Result<PlanarImage> {
-    let first = tiles
-        .first()
-        .ok_or_else(|| Error::Invalid("a contact sheet needs at least one image".into()))?;
-    let (c, h, w) = (first.channels, first.height, first.width);
-    if let Some(t) = tiles
-        .iter()
-        .find(|t| (t.channels, t.height, t.width) != (c, h, w))
-    {
-        return Err(Error::Invalid(format!(
-            "contact sheet tiles differ in shape: {c}×{h}×{w} and {}×{}×{}",
-            t.channels, t.height, t.width
-        )));
-    }
-    let (columns, rows) = contact_sheet_grid(tiles.len());
-    let gap = CONTACT_SHEET_GAP;
-    let (sheet_h, sheet_w) = (
-        rows * h + (rows - 1) * gap,
-        columns * w + (columns - 1) * gap,
-    );
-    let mut sheet = PlanarImage::filled(c, sheet_h, sheet_w, background);
-    for (k, tile) in tiles.iter().enumerate() {
-        let (top, left) = ((k / columns) * (h + gap), (k % columns) * (w + gap));
-        for ch in 0..c {
-            for row in 0..h {
-                let src = (ch * h + row) * w;
-                let dst = (ch * sheet_h + top + row) * sheet_w + left;
-                sheet.data[dst..dst + w].copy_from_slice(&tile.data[src..src + w]);
-            }
-        }
-    }
-    Ok(sheet)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn contact_sheet_grid_is_near_square() {
-        assert_eq!(contact_sheet_grid(1), (1, 1));
-        assert_eq!(contact_sheet_grid(4), (2, 2));
-        assert_eq!(contact_sheet_grid(5), (3, 2));
-        assert_eq!(contact_sheet_grid(8), (3, 3));
-        assert_eq!(contact_sheet_grid(10), (4, 3));
-    }
-
-    #[test]
-    fn contact_sheet_places_tiles_row_major() {
-        let tiles: Vec<_> = (0..3)
-            .map(|k| PlanarImage::filled(1, 2, 3, k as f32 + 1.0))
-            .collect();
-        let sheet = contact_sheet(&tiles, 0.0).unwrap();
-        assert_eq!(
-            (sheet.height, sheet.width),
-            (2 * 2 + CONTACT_SHEET_GAP, 2 * 3 + CONTACT_SHEET_GAP)
-        );
-        assert_eq!(sheet.get(0, 0, 0), 1.0);
-        assert_eq!(sheet.get(0, 1, 3 + CONTACT_SHEET_GAP), 2.0);
-        assert_eq!(sheet.get(0, 2 + CONTACT_SHEET_GAP, 2), 3.0);
-        assert_eq!(
-            sheet.get(0, 2 + CONTACT_SHEET_GAP, 3 + CONTACT_SHEET_GAP),
-            0.0
-        );
-        assert_eq!(sheet.get(0, 0, 3), 0.0);
-    }
 
     #[test]
     fn png_round_trip_is_within_half_a_step() {

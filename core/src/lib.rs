@@ -1,6 +1,6 @@
 //! # photomat-core
 //!
-//! The conventions every photomat crate shares (`shared/DESIGN.md` §2–3): the
+//! The conventions every photomat crate shares (`docs/conventions.md`): the
 //! [`DifferentiableBrdf`] trait and its parameter specs, the plugin [`registry`], the shared
 //! [`microfacet`] maths, the collocated-[`flash`] plane geometry, the differentiable
 //! [`render`]er, the material-map folder format ([`map_files`]) and the seeded random
@@ -21,26 +21,31 @@ pub mod checkpoint;
 pub mod error;
 pub mod flash;
 pub mod image_io;
+pub mod lights;
 pub mod lobes;
 pub mod map_files;
 pub mod maps;
 pub mod microfacet;
 pub mod param;
+pub mod paths;
 pub mod plugin_spec;
+pub mod previews;
 pub mod registry;
 pub mod render;
 pub mod rng;
 pub mod shading;
+pub mod sheet;
 pub mod vecops;
 
 pub use adapter::{AdaptedBrdf, MapAdapter};
 pub use brdf::{Brdf, DifferentiableBrdf};
 pub use error::{Error, Result};
 pub use flash::{FlashGeometry, Highlight};
+pub use lights::LightSet;
 pub use maps::MaterialMaps;
 pub use param::{ColorSpace, Encoding, ParamSpec};
 pub use registry::{ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations};
-pub use render::{encode_display, render, render_radiance, render_radiance_with};
+pub use render::{encode_display, render, render_radiance, render_radiance_with, render_with};
 pub use rng::SplitMix64;
 pub use shading::ShadingGeometry;
 

@@ -1,4 +1,5 @@
-//! The differentiable collocated-flash renderer (DESIGN §2).
+//! The differentiable collocated-flash renderer (`docs/conventions.md`, "Geometry and
+//! radiometry").
 //!
 //! Per texel: `radiance = I · f(ω, ω)·cos θ · / d²` with `I = π`, ω the direction to the flash
 //! and d the distance to it; the display encoding is `clamp(x, 0, 1)^(1/2.2)`. Everything is
@@ -74,6 +75,30 @@ pub fn render_radiance_with(
     let omega = &geometry.omega;
     let f_cos = brdf.eval(omega, omega, maps)?;
     Ok((f_cos.broadcast_mul(&geometry.inv_dist2)? * FLASH_INTENSITY)?)
+}
+
+/// Display-encoded render in [0, 1] under a prebuilt [`FlashGeometry`]: [`encode_display`] of
+/// [`render_radiance_with`]. Build the geometry once (e.g. [`crate::LightSet::geometry`]) and
+/// hand its ω to the relighting MLP as well, so both see the same lights; [`render`] equals
+/// this with the geometry built from its highlights.
+///
+/// # Shapes
+/// maps (B|1, C, R, R), geometry over R×R with B lights → (B, 3, R, R).
+pub fn render_with(
+    brdf: &dyn DifferentiableBrdf,
+    maps: &MaterialMaps,
+    geometry: &FlashGeometry,
+) -> Result<Tensor> {
+    maps.validate_shapes(&brdf.name(), brdf.params())?;
+    let (batch, _, _) = maps.batch_and_size()?;
+    let lights = geometry.omega.dim(0)?;
+    if batch != 1 && batch != lights {
+        return Err(Error::Invalid(format!(
+            "{lights} light(s) for a batch of {batch} materials: give one per material, \
+             or a single material"
+        )));
+    }
+    encode_display(&render_radiance_with(brdf, maps, geometry)?)
 }
 
 /// `clamp(x, 0, 1)^(1/2.2)` with the [`ENCODE_FLOOR`] lower clamp: linear → display values.

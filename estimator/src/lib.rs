@@ -50,6 +50,7 @@
 pub mod conv;
 pub mod loss;
 pub mod model_files;
+pub mod sample;
 pub mod train;
 pub mod unet;
 pub mod upsample;

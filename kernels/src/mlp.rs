@@ -1347,7 +1347,8 @@ mod tests {
     use candle_core::{Device, Var};
 
     use super::*;
-    use crate::testing::{max_abs_diff, pseudo_random};
+    use crate::testing::max_abs_diff;
+    use photomat_core::rng::pseudo_random;
 
     const ACT: MlpActivation = MlpActivation {
         slope: 0.2,

@@ -9,7 +9,8 @@
 //! before the thread's first `backward()`; this file holds a single test, which sets it first.
 
 use candle_core::{DType, Device, Result, Tensor, Var};
-use photomat_kernels::testing::{max_abs_diff, pseudo_random};
+use photomat_core::rng::pseudo_random;
+use photomat_kernels::testing::max_abs_diff;
 use photomat_kernels::{MlpActivation, MlpLayer, per_texel_mlp, with_reference_ops};
 
 const ACT: MlpActivation = MlpActivation {

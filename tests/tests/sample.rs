@@ -302,3 +302,112 @@ fn sample_without_a_model_names_the_path_and_how_to_train() {
         "{text}"
     );
 }
+
+/// Every file under `dir` but `summary.json`, by relative path, with its bytes.
+fn tree(dir: &Path) -> Vec<(String, Vec<u8>)> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else if path.file_name().unwrap() != "summary.json" {
+                let rel = path
+                    .strip_prefix(dir)
+                    .unwrap()
+                    .to_string_lossy()
+                    .into_owned();
+                files.push((rel, std::fs::read(&path).unwrap()));
+            }
+        }
+    }
+    files.sort();
+    files
+}
+
+#[test]
+fn sampler_library_writes_what_the_command_writes() {
+    use photomat_estimator::sample::{SampleEvent, SampleOptions, Sampler};
+    let model = tiny_model(true);
+    let out = tempfile::tempdir().unwrap();
+    let (by_cli, by_lib) = (out.path().join("cli"), out.path().join("lib"));
+    let printed = sample(&[
+        "--model",
+        model.path().to_str().unwrap(),
+        "--out",
+        by_cli.to_str().unwrap(),
+        "--count",
+        "2",
+        "--seed",
+        "5",
+        "--tileable",
+        "--hextile",
+        "--gltf",
+        "--size-render",
+        "16",
+    ])
+    .unwrap();
+
+    let sampler = Sampler::open(model.path(), &Device::Cpu).unwrap();
+    let options = SampleOptions {
+        count: 2,
+        seed: 5,
+        tileable: true,
+        hextile: true,
+        gltf: true,
+        render_size: Some(16),
+        ..SampleOptions::default()
+    };
+    let mut events = Vec::new();
+    let summary = sampler
+        .run(&options, &by_lib, &mut |e| {
+            events.push(e);
+            Ok(())
+        })
+        .unwrap();
+
+    let (a, b) = (tree(&by_cli), tree(&by_lib));
+    assert!(a.len() > 20, "{} files", a.len());
+    assert_eq!(
+        a.iter().map(|(p, _)| p).collect::<Vec<_>>(),
+        b.iter().map(|(p, _)| p).collect::<Vec<_>>()
+    );
+    for ((path, x), (_, y)) in a.iter().zip(&b) {
+        assert!(x == y, "{path} differs between the command and the library");
+    }
+    assert_eq!(summary.seeds, vec![5, 6]);
+    let saved: Value =
+        serde_json::from_str(&std::fs::read_to_string(by_cli.join("summary.json")).unwrap())
+            .unwrap();
+    assert_eq!(
+        saved["l1_per_light"],
+        serde_json::json!(summary.l1_per_light)
+    );
+    // The notes the command printed are the library's Note events, then one tick per material.
+    let notes: Vec<&String> = events
+        .iter()
+        .filter_map(|e| match e {
+            SampleEvent::Note(line) => Some(line),
+            SampleEvent::Material { .. } => None,
+        })
+        .collect();
+    assert!(
+        !notes.is_empty(),
+        "the glTF mapping of height(ggx) has notes"
+    );
+    for note in &notes {
+        assert!(printed.contains(note.as_str()), "{note}");
+    }
+    let ticks: Vec<_> = events
+        .iter()
+        .filter(|e| matches!(e, SampleEvent::Material { .. }))
+        .collect();
+    assert_eq!(
+        ticks,
+        [
+            &SampleEvent::Material { done: 1, total: 2 },
+            &SampleEvent::Material { done: 2, total: 2 }
+        ]
+    );
+}

@@ -44,7 +44,9 @@ use candle_nn::VarMap;
 use indicatif::{ProgressBar, ProgressStyle};
 use photomat_core::render::to_network_range;
 use photomat_core::rng::{SplitMix64, pseudo_random};
-use photomat_core::{Brdf, FlashGeometry, Highlight, encode_display, lookup, render_radiance_with};
+use photomat_core::{
+    Brdf, FlashGeometry, Highlight, LightSet, encode_display, lookup, render_radiance_with,
+};
 use photomat_estimator::{EstimatorConfig, EstimatorModel, upsample2x_periodic};
 use photomat_generator::activation::bias_lrelu;
 use photomat_generator::fir::upsample2d;
@@ -65,9 +67,10 @@ const BRDF: &str = "height(ggx)";
 const MICRO_CHANNELS: usize = 64;
 /// Side of the square matrices of the `sgemm` case.
 const SGEMM_SIDE: usize = 1024;
-/// Weight of the L1 term of E's loss (DESIGN §4: 0.1·L1, Gram left out of this bench).
+/// Weight of the L1 term of E's loss (PhotoMat §3: 0.1·L1, Gram left out of this bench).
 const L1_WEIGHT: f64 = 0.1;
-/// Lazy R1 interval of the reference (DESIGN §4), applied as the trainer does.
+/// Lazy R1 interval of the reference (StyleGAN2, Karras et al. 2020), applied as the trainer
+/// does.
 const R1_INTERVAL: usize = 16;
 
 /// One benchmark case.
@@ -317,11 +320,8 @@ impl Setup {
             &dev,
         )?;
         let mut rng = SplitMix64(args.seed);
-        let highlights: Vec<Highlight> = (0..b)
-            .map(|_| Highlight::new(rng.next_unit() - 0.5, rng.next_unit() - 0.5))
-            .collect();
-        let lights = FlashGeometry::new(&highlights, r, DType::F32, &dev)?;
-        let centre = FlashGeometry::new(&[Highlight::CENTER], r, DType::F32, &dev)?;
+        let lights = LightSet::uniform(b, || rng.next_unit()).geometry(r, DType::F32, &dev)?;
+        let centre = LightSet::single(Highlight::CENTER).geometry(r, DType::F32, &dev)?;
         let seeds: Vec<u64> = (0..b as u64).map(|i| args.seed.wrapping_add(i)).collect();
         let (z, noise) = (gan.latents(&seeds)?, gan.noise_images(&seeds)?);
         let (z1, noise1) = (gan.latents(&seeds[..1])?, gan.noise_images(&seeds[..1])?);

@@ -38,7 +38,7 @@ use candle_core::{DType, Device, Tensor, Var};
 use photomat_core::{Brdf, MaterialMaps, ParamSpec, lookup};
 use serde::{Deserialize, Serialize};
 
-use super::shortest;
+use crate::common::shortest;
 
 /// Shortest direction accepted before normalising: a zero vector has no direction, and 1e-12
 /// is far below any deliberately written component.

@@ -10,7 +10,7 @@ use photomat_core::param::total_channels;
 use photomat_core::{BrdfRegistration, ColorSpace, Encoding, ParamSpec, lookup, registrations};
 use serde::Serialize;
 
-use super::shortest;
+use crate::common::shortest;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {

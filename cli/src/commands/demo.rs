@@ -9,13 +9,13 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use candle_core::Device;
-use photomat_core::image_io::{PngBits, contact_sheet, write_png};
+use photomat_core::image_io::{PlanarImage, PngBits, write_png};
+use photomat_core::lights::DEFAULT_ORBIT_RADIUS;
 use photomat_core::map_files::{SaveOptions, save_maps};
-use photomat_core::{Highlight, lookup, render};
+use photomat_core::previews::map_previews;
+use photomat_core::sheet::contact_sheet;
+use photomat_core::{Highlight, LightSet, lookup, render};
 use photomat_data::procedural::{family, family_names};
-
-use super::previews::map_previews;
-use super::render::orbit;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -59,14 +59,15 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let render_path = args.out.join("render.png");
     write_png(
         &render_path,
-        &photomat_core::image_io::PlanarImage::from_tensor(&centre)?,
+        &PlanarImage::from_tensor(&centre)?,
         PngBits::Eight,
     )?;
 
-    let tiles = orbit(args.orbit as usize, 0.35)?
+    let tiles = LightSet::orbit(args.orbit as usize, DEFAULT_ORBIT_RADIUS)?
+        .highlights()
         .iter()
         .map(|h| {
-            Ok(photomat_core::image_io::PlanarImage::from_tensor(&render(
+            Ok(PlanarImage::from_tensor(&render(
                 brdf.as_ref(),
                 &maps,
                 &[*h],
@@ -87,12 +88,25 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         PngBits::Eight,
     )?;
 
+    let names: Vec<_> = previews.iter().map(|(n, _)| n.as_str()).collect();
+    let paths = [material_dir, render_path, orbit_path, maps_path];
+    report(args, family.name(), &brdf.name(), &paths, &names, out)
+}
+
+/// The lines after a run: what was written where.
+fn report(
+    args: &Args,
+    family: &str,
+    model: &str,
+    [material_dir, render_path, orbit_path, maps_path]: &[PathBuf; 4],
+    names: &[&str],
+    out: &mut dyn Write,
+) -> anyhow::Result<()> {
+    let size = args.size;
     writeln!(
         out,
         "procedural material '{}' (seed {}, {size}×{size}), model {}",
-        family.name(),
-        args.seed,
-        brdf.name()
+        family, args.seed, model
     )?;
     writeln!(
         out,
@@ -106,11 +120,10 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     )?;
     writeln!(
         out,
-        "  {}  {} flash positions on a circle of radius 0.35",
+        "  {}  {} flash positions on a circle of radius {DEFAULT_ORBIT_RADIUS}",
         orbit_path.display(),
         args.orbit
     )?;
-    let names: Vec<_> = previews.iter().map(|(n, _)| n.as_str()).collect();
     writeln!(
         out,
         "  {}  maps, left to right: {}",

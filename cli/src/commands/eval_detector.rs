@@ -14,7 +14,7 @@ use std::path::PathBuf;
 use photomat_data::dataset::{FlashDataset, evaluate};
 use photomat_data::highlight::DetectorKind;
 
-use super::prepare::parse_detector;
+use crate::common::parse_detector;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {

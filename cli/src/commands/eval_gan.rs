@@ -16,11 +16,12 @@ use std::time::Instant;
 
 use anyhow::Context;
 use candle_core::Device;
-use indicatif::{ProgressBar, ProgressStyle};
 use photomat_data::source::DatasetSource;
 use photomat_generator::GanModel;
-use photomat_generator::swd::{EvalPhase, SwdConfig, model_swd};
+use photomat_generator::swd::{EvalPhase, SwdConfig, SwdReport, model_swd};
 use serde_json::json;
+
+use crate::common::progress_bar;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -62,12 +63,9 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     })?;
     let count = args.count as usize;
 
-    let bar = ProgressBar::new(2 * args.count).with_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} images: {msg} ({eta} left)",
-        )
-        .expect("the template is valid")
-        .progress_chars("=> "),
+    let bar = progress_bar(
+        2 * args.count,
+        "{elapsed_precise} [{bar:40}] {pos}/{len} images: {msg} ({eta} left)",
     );
     let start = Instant::now();
     let report = model_swd(
@@ -96,7 +94,18 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         )
     })?;
     let seconds = start.elapsed().as_secs_f64();
+    print_report(args, side, &report, seconds, out)
+}
 
+/// The measurement as JSON (`--json`) or as a table.
+fn print_report(
+    args: &Args,
+    side: usize,
+    report: &SwdReport,
+    seconds: f64,
+    out: &mut dyn Write,
+) -> anyhow::Result<()> {
+    let count = args.count as usize;
     if args.json {
         let levels: Vec<_> = report
             .per_level

@@ -15,6 +15,8 @@ use std::path::PathBuf;
 use photomat_data::dataset::{PrepareOptions, REPORT_FILE, prepare};
 use photomat_data::highlight::DetectorKind;
 
+use crate::common::parse_detector;
+
 #[derive(Debug, clap::Args)]
 pub struct Args {
     /// Folder of flash photos (JPEG or PNG; files directly inside it).
@@ -39,11 +41,6 @@ pub struct Args {
     /// Reject non-square photos instead of centre-cropping them.
     #[arg(long)]
     pub reject_non_square: bool,
-}
-
-pub(crate) fn parse_detector(name: &str) -> Result<DetectorKind, String> {
-    name.parse()
-        .map_err(|e: photomat_core::Error| e.to_string())
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {

@@ -1,12 +1,12 @@
 //! `photomat relight --gan RUN --seed S --orbit N --out FILE.png [--frames DIR]
 //! [--gif FILE.gif] [--psi 1.0] [--radius 0.35] [--frame-ms 100]`: one neural material of a
-//! trained GAN under N flash positions (issue 6, item 6; PhotoMat §3: M relights the features
+//! trained GAN under N flash positions (PhotoMat §3: M relights the features
 //! F of G under any light).
 //!
 //! The material is `GanModel::features_for_seeds([S], ψ)` — z and noise drawn from S, so a
 //! seed names the same material on every machine. The flash positions are the orbit of
 //! `photomat render --orbit` (N highlights evenly spaced on a circle of radius `--radius`
-//! around the centre, θ_k = 2π(k + ½)/N, [`super::render::orbit`]); for each, M maps F ‖ ω
+//! around the centre, θ_k = 2π(k + ½)/N, [`photomat_core::LightSet::orbit`]); for each, M maps F ‖ ω
 //! (per-texel direction to the collocated flash) to an image in the encoded space [−1, 1],
 //! shown as (x + 1)/2 clamped to [0, 1]. Outputs: a contact sheet PNG (row by row, ⌈√N⌉
 //! columns, black gaps), optionally one PNG per position (`DIR/frame-000.png`, …) and an
@@ -19,13 +19,14 @@ use anyhow::{Context, bail};
 use candle_core::{Device, Tensor};
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
-use indicatif::{ProgressBar, ProgressStyle};
-use photomat_core::image_io::{PlanarImage, PngBits, contact_sheet, write_atomic, write_png};
+use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
+use photomat_core::lights::DEFAULT_ORBIT_RADIUS;
+use photomat_core::sheet::contact_sheet;
+use photomat_core::{FlashGeometry, Highlight};
 use photomat_generator::GanModel;
-use photomat_generator::train::data::omega_for;
 use photomat_generator::train::samples::display_tiles;
 
-use super::render::orbit;
+use crate::common::{orbit_lights, progress_bar};
 
 /// Most orbit positions accepted (as `photomat render --orbit`).
 const MAX_ORBIT: u32 = 1024;
@@ -56,7 +57,7 @@ pub struct Args {
     #[arg(
         long,
         value_name = "R",
-        default_value_t = 0.35,
+        default_value_t = DEFAULT_ORBIT_RADIUS,
         allow_hyphen_values = true
     )]
     pub radius: f64,
@@ -97,18 +98,16 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     if !args.psi.is_finite() {
         bail!("--psi must be a finite number, got {}", args.psi);
     }
-    let highlights = orbit(args.orbit as usize, args.radius)?;
+    let lights = orbit_lights(args.orbit, args.radius)?;
+    let highlights = lights.highlights();
     let device = Device::Cpu;
     let model = GanModel::load(&args.gan, &device)
         .with_context(|| format!("cannot load the GAN model in '{}'", args.gan.display()))?;
     let side = model.config().resolution;
 
-    let bar = ProgressBar::new(highlights.len() as u64).with_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} lights ({eta} left)",
-        )
-        .expect("the template is valid")
-        .progress_chars("=> "),
+    let bar = progress_bar(
+        highlights.len() as u64,
+        "{elapsed_precise} [{bar:40}] {pos}/{len} lights ({eta} left)",
     );
     let features = model
         .features_for_seeds(&[args.seed], args.psi)
@@ -134,6 +133,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         args.gan.display(),
         tiles.len()
     )?;
+    write_extras(args, &tiles, out)
+}
+
+/// `--frames DIR` and `--gif FILE`, when given.
+fn write_extras(args: &Args, tiles: &[PlanarImage], out: &mut dyn Write) -> anyhow::Result<()> {
     if let Some(dir) = &args.frames {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("cannot create the frames folder '{}'", dir.display()))?;
@@ -145,7 +149,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         writeln!(out, "wrote {} frames into {}", tiles.len(), dir.display())?;
     }
     if let Some(path) = &args.gif {
-        let bytes = encode_gif(&tiles, args.frame_ms)
+        let bytes = encode_gif(tiles, args.frame_ms)
             .with_context(|| format!("cannot encode '{}'", path.display()))?;
         write_atomic(path, &bytes).with_context(|| format!("cannot write '{}'", path.display()))?;
         writeln!(
@@ -163,14 +167,14 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
 fn relight(
     model: &GanModel,
     features: &Tensor,
-    lights: &[photomat_core::Highlight],
+    lights: &[Highlight],
     side: usize,
 ) -> anyhow::Result<Vec<PlanarImage>> {
     let (_, c, h, w) = features.dims4()?;
     let batch = features
         .broadcast_as((lights.len(), c, h, w))?
         .contiguous()?;
-    let omega = omega_for(lights, side, model.device())?;
+    let omega = FlashGeometry::omega_for(lights, side, model.device())?;
     let images = model
         .relight()
         .forward(&batch, &omega)

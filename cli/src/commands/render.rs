@@ -1,4 +1,5 @@
-//! `photomat render`: a material folder rendered under the collocated flash (DESIGN §2) and
+//! `photomat render`: a material folder rendered under the collocated flash
+//! (`docs/conventions.md`, "Geometry and radiometry") and
 //! written as an 8-bit PNG of display-encoded values (`clamp(x, 0, 1)^(1/2.2)`).
 //!
 //! `--light X,Y` renders one image with the highlight at (X, Y) in plane coordinates (the
@@ -13,9 +14,13 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
 use clap::ArgGroup;
-use photomat_core::image_io::{PlanarImage, PngBits, contact_sheet, write_png};
+use photomat_core::image_io::{PlanarImage, PngBits, write_png};
+use photomat_core::lights::DEFAULT_ORBIT_RADIUS;
 use photomat_core::map_files::load_maps;
-use photomat_core::{Highlight, lookup, render};
+use photomat_core::sheet::contact_sheet;
+use photomat_core::{Highlight, LightSet, lookup, render};
+
+use crate::common::orbit_lights;
 
 /// Most orbit positions accepted: a sheet of 32×32 renders is already unreadable.
 const MAX_ORBIT: u32 = 1024;
@@ -45,7 +50,7 @@ pub struct Args {
     #[arg(
         long,
         value_name = "R",
-        default_value_t = 0.35,
+        default_value_t = DEFAULT_ORBIT_RADIUS,
         allow_hyphen_values = true
     )]
     pub radius: f64,
@@ -57,11 +62,12 @@ pub struct Args {
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     check_png_name(&args.out)?;
-    let highlights = match (args.light, args.orbit) {
-        (Some(light), None) => vec![light],
-        (None, Some(n)) => orbit(n as usize, args.radius)?,
+    let lights = match (args.light, args.orbit) {
+        (Some(light), None) => LightSet::single(light),
+        (None, Some(n)) => orbit_lights(n, args.radius)?,
         _ => bail!("give exactly one of --light X,Y and --orbit N"),
     };
+    let highlights = lights.highlights();
     let brdf = match &args.brdf {
         Some(spec) => Some(lookup(spec).context("invalid --brdf")?),
         None => None,
@@ -118,19 +124,6 @@ pub fn parse_light(text: &str) -> Result<Highlight, String> {
     Ok(Highlight::new(x, y))
 }
 
-/// `n` highlights on a circle of radius `radius` at θ_k = 2π(k + ½)/n.
-pub fn orbit(n: usize, radius: f64) -> anyhow::Result<Vec<Highlight>> {
-    if !(radius.is_finite() && radius >= 0.0) {
-        bail!("--radius must be a finite number ≥ 0, got {radius}");
-    }
-    Ok((0..n)
-        .map(|k| {
-            let theta = std::f64::consts::TAU * (k as f64 + 0.5) / n as f64;
-            Highlight::new(radius * theta.cos(), radius * theta.sin())
-        })
-        .collect())
-}
-
 /// Renders are written as PNG: refuse names that promise another format.
 fn check_png_name(path: &Path) -> anyhow::Result<()> {
     let is_png = path
@@ -158,16 +151,5 @@ mod tests {
             let err = parse_light(bad).unwrap_err();
             assert!(err.contains(bad), "{bad}: {err}");
         }
-    }
-
-    #[test]
-    fn orbit_is_evenly_spaced_on_the_circle() {
-        let hs = orbit(4, 0.35).unwrap();
-        let d = 0.35 / 2f64.sqrt();
-        let expected = [(d, d), (-d, d), (-d, -d), (d, -d)];
-        for (h, (x, y)) in hs.iter().zip(expected) {
-            assert!((h.x - x).abs() < 1e-12 && (h.y - y).abs() < 1e-12, "{h:?}");
-        }
-        assert!(orbit(3, -1.0).is_err());
     }
 }

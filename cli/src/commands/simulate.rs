@@ -16,12 +16,13 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use indicatif::{ProgressBar, ProgressStyle};
 use photomat_data::procedural::{Family, families, family, family_names};
 use photomat_data::simulator::{
     CameraModel, CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig,
-    simulate,
+    SimulationManifest, simulate,
 };
+
+use crate::common::progress_bar;
 
 /// Photo file format on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -129,12 +130,9 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         .build()
         .context("cannot start the worker threads")?;
 
-    let bar = ProgressBar::new(args.count as u64).with_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:40}] {pos}/{len} photos ({per_sec}, {eta} left)",
-        )
-        .expect("the template is valid")
-        .progress_chars("=> "),
+    let bar = progress_bar(
+        args.count as u64,
+        "{elapsed_precise} [{bar:40}] {pos}/{len} photos ({per_sec}, {eta} left)",
     );
     let start = Instant::now();
     let result = pool.install(|| simulate(&args.out, &config, args.overwrite, &|| bar.inc(1)));
@@ -142,8 +140,26 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let manifest =
         result.with_context(|| format!("cannot simulate photos into '{}'", args.out.display()))?;
     let seconds = start.elapsed().as_secs_f64();
-
     let used: Vec<&str> = config.families.iter().map(|f| f.name()).collect();
+    report(
+        args,
+        &manifest,
+        &used,
+        seconds,
+        pool.current_num_threads(),
+        out,
+    )
+}
+
+/// The lines after a run: speed, families and what was written where.
+fn report(
+    args: &Args,
+    manifest: &SimulationManifest,
+    used: &[&str],
+    seconds: f64,
+    threads: usize,
+    out: &mut dyn Write,
+) -> anyhow::Result<()> {
     writeln!(
         out,
         "simulated {} photos of {}×{} (seed {}) in {seconds:.1} s: {:.2} photos/s on {} threads",
@@ -154,7 +170,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         // A zero elapsed time cannot happen for a run that wrote files; the floor only keeps
         // the division finite.
         manifest.photos.len() as f64 / seconds.max(1e-9),
-        pool.current_num_threads()
+        threads
     )?;
     writeln!(
         out,

@@ -2,7 +2,8 @@
 //! [--batch 4] [--lr 1e-4] [--finetune-lr 5e-5] [--vgg19 FILE] [--width 1.0] [--seed S]
 //! [--panel-every K] [--checkpoint-every K] [--resume]`: trains the map estimator E for the
 //! BRDF model SPEC against the frozen G_ema + M of a GAN model folder (PhotoMat §3 "Material
-//! map estimator", issue 7; the step is `photomat_estimator::train::EstimatorTrainer`).
+//! map estimator"). The run is the library's `photomat_estimator::train::EstimatorTraining`
+//! driver; this command parses the flags, installs the Ctrl-C handler and shows progress.
 //!
 //! SPEC is any registered model, including plugins linked into a custom binary built on
 //! `photomat_cli::run()`. Stage 1 (`--steps`) compares the analytic render of E's maps with
@@ -23,32 +24,11 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::Ordering;
-use std::time::Instant;
 
-use anyhow::{Context, bail};
 use candle_core::Device;
-use indicatif::{ProgressBar, ProgressStyle};
-use photomat_core::image_io::{CONTACT_SHEET_GAP, PlanarImage, PngBits, write_png};
-use photomat_core::{Highlight, lookup};
-use photomat_estimator::train::{
-    EstimatorTrainer, StepReport, TRAIN_STATE_FILE, TrainConfig, TrainManifest, copy_gan_model,
-};
-use photomat_estimator::{EstimatorConfig, EstimatorModel};
-use photomat_generator::GanModel;
+use photomat_estimator::train::{Cadence, EstimatorOutcome, EstimatorSettings, EstimatorTraining};
 
-use super::previews::map_previews;
-
-/// Default stage-1 steps for a new run (the paper trains 60 k; CPU runs set fewer).
-const DEFAULT_STEPS: u64 = 60_000;
-/// Default fine-tune steps for a new run (the paper trains 60 k).
-const DEFAULT_FINETUNE_STEPS: u64 = 60_000;
-/// Materials shown in each training panel.
-const PANEL_MATERIALS: u64 = 2;
-/// Key mixed into the run seed for the panels' fixed materials (distinct from every step's).
-const PANEL_SEED_KEY: u64 = 0x7061_6E65_6C73; // "panels"
-/// Light of the panels: off-centre, so that both the highlight and the falloff show.
-const PANEL_LIGHT: Highlight = Highlight { x: 0.2, y: 0.2 };
+use crate::common::{steps_bar, stop_flag};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -131,272 +111,34 @@ Write it once with PyTorch, torchvision and safetensors:
 Without --vgg19, a seeded random conv bank with the same five pooled stages (3→16→32→64→64→64) \
 gives the Gram statistics (Ustyuzhaninov et al. 2017).";
 
-/// `config` with every training flag that was given applied.
-fn apply_flags(mut config: TrainConfig, args: &Args) -> TrainConfig {
-    if let Some(v) = args.steps {
-        config.steps = v;
-    }
-    if let Some(v) = args.finetune_steps {
-        config.finetune_steps = v;
-    }
-    if let Some(v) = args.batch {
-        config.batch = v;
-    }
-    if let Some(v) = args.lr {
-        config.lr = v;
-    }
-    if let Some(v) = args.finetune_lr {
-        config.finetune_lr = v;
-    }
-    if let Some(v) = args.seed {
-        config.seed = v;
-    }
-    if let Some(path) = &args.vgg19 {
-        config.vgg19 = Some(absolute(path));
-    }
-    config
-}
-
-/// E's architecture for `gan` and a model of `channels` parameters at width `width`.
-fn architecture(gan: &GanModel, channels: usize, width: f64) -> anyhow::Result<EstimatorConfig> {
-    EstimatorConfig {
-        in_channels: gan.config().feature_channels,
-        out_channels: channels,
-        ..EstimatorConfig::default()
-    }
-    .with_width(width)
-    .context("invalid --width")
-}
-
-/// `path` made absolute (links resolved) when it exists, so that `train.json` names the GAN
-/// folder whatever the working directory of a later `--resume`; unchanged otherwise (loading
-/// it then reports the missing folder).
-fn absolute(path: &Path) -> PathBuf {
-    std::fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
-}
-
-/// A new run from the flags.
-fn fresh(args: &Args, device: &Device) -> anyhow::Result<(EstimatorTrainer, PathBuf)> {
-    let Some(gan_dir) = args.gan.as_deref().map(absolute) else {
-        bail!("--gan RUN is required for a new run (a `photomat train-gan` output folder)");
-    };
-    let Some(spec) = &args.brdf else {
-        bail!("--brdf SPEC is required for a new run (`photomat brdfs` lists the models)");
-    };
-    let brdf = lookup(spec).context("invalid --brdf")?;
-    let gan = GanModel::load(&gan_dir, device)
-        .with_context(|| format!("cannot load the GAN model {}", gan_dir.display()))?;
-    let config = apply_flags(
-        TrainConfig {
-            steps: DEFAULT_STEPS,
-            finetune_steps: DEFAULT_FINETUNE_STEPS,
-            ..TrainConfig::default()
-        },
-        args,
-    );
-    config
-        .validate(gan.config().resolution)
-        .context("invalid training settings")?;
-    let arch = architecture(&gan, brdf.channels(), args.width.unwrap_or(1.0))?;
-    let model = EstimatorModel::new_seeded(brdf, arch, config.seed, device)?;
-    let trainer = EstimatorTrainer::new(gan, model, config)?;
-    Ok((trainer, gan_dir))
-}
-
-/// The run in `args.out`, after checking that no given flag contradicts its `train.json`.
-fn resumed(args: &Args, device: &Device) -> anyhow::Result<(EstimatorTrainer, PathBuf)> {
-    let saved = TrainManifest::load(&args.out)?;
-    let file = args
-        .out
-        .join(photomat_estimator::train::TRAIN_MANIFEST_FILE);
-    let mut conflicts = Vec::new();
-    if let Some(gan) = args.gan.as_deref().map(absolute)
-        && gan != saved.gan
-    {
-        conflicts.push(format!(
-            "--gan {} contradicts gan = {}",
-            gan.display(),
-            saved.gan.display()
-        ));
-    }
-    let brdf = lookup(&saved.brdf)
-        .with_context(|| format!("{}: the run's BRDF model cannot be built", file.display()))?;
-    if let Some(spec) = &args.brdf {
-        let given = lookup(spec).context("invalid --brdf")?.name();
-        if given != saved.brdf {
-            conflicts.push(format!("--brdf {given} contradicts brdf = {}", saved.brdf));
+impl Args {
+    /// The run's settings as the flags give them.
+    fn settings(&self) -> EstimatorSettings {
+        EstimatorSettings {
+            gan: self.gan.clone(),
+            brdf: self.brdf.clone(),
+            steps: self.steps,
+            finetune_steps: self.finetune_steps,
+            batch: self.batch,
+            lr: self.lr,
+            finetune_lr: self.finetune_lr,
+            vgg19: self.vgg19.clone(),
+            width: self.width,
+            seed: self.seed,
         }
     }
-    let gan = GanModel::load(&saved.gan, device)
-        .with_context(|| format!("cannot load the run's GAN model {}", saved.gan.display()))?;
-    if let Some(width) = args.width {
-        let given = architecture(&gan, brdf.channels(), width)?;
-        if given != saved.architecture {
-            conflicts.push(format!(
-                "--width {width} gives encoder widths {:?}, which contradicts the run's {:?}",
-                given.encoder_channels, saved.architecture.encoder_channels
-            ));
-        }
-    }
-    let config = apply_flags(saved.config.clone(), args);
-    if let Err(e) = config.check_resume(&saved.config) {
-        conflicts.push(e.to_string());
-    }
-    if !conflicts.is_empty() {
-        bail!(
-            "cannot resume {}: {} (leave the flag out to keep the run's value)",
-            file.display(),
-            conflicts.join("; ")
-        );
-    }
-    config
-        .validate(gan.config().resolution)
-        .context("invalid training settings")?;
-    let model = EstimatorModel::new(
-        brdf,
-        saved.architecture.clone(),
-        candle_nn::VarMap::new(),
-        device,
-    )?;
-    let mut trainer = EstimatorTrainer::new(gan, model, config)?;
-    trainer.load_checkpoint(&args.out)?;
-    Ok((trainer, saved.gan))
-}
-
-/// Writes the training state, E's model files and `train.json` into `run`.
-fn checkpoint(trainer: &EstimatorTrainer, run: &Path, gan_dir: &Path) -> anyhow::Result<()> {
-    trainer
-        .save_checkpoint(run, gan_dir)
-        .with_context(|| format!("cannot save the checkpoint in {}", run.display()))
-}
-
-/// Tiles laid out one row per inner vector, [`CONTACT_SHEET_GAP`] pixels of `background`
-/// between them; rows may differ in length (the sheet is as wide as the longest).
-fn rows_sheet(rows: &[Vec<PlanarImage>], background: f32) -> anyhow::Result<PlanarImage> {
-    let first = rows
-        .iter()
-        .flatten()
-        .next()
-        .context("a panel needs at least one image")?;
-    let (c, h, w) = (first.channels, first.height, first.width);
-    let gap = CONTACT_SHEET_GAP;
-    let columns = rows.iter().map(Vec::len).max().unwrap_or(1);
-    let (sheet_h, sheet_w) = (rows.len() * (h + gap) - gap, columns * (w + gap) - gap);
-    let mut sheet = PlanarImage::filled(c, sheet_h, sheet_w, background);
-    for (r, row) in rows.iter().enumerate() {
-        for (k, tile) in row.iter().enumerate() {
-            if (tile.channels, tile.height, tile.width) != (c, h, w) {
-                bail!("panel tiles differ in shape");
-            }
-            for ch in 0..c {
-                for y in 0..h {
-                    let dst = (ch * sheet_h + r * (h + gap) + y) * sheet_w + k * (w + gap);
-                    let src = (ch * h + y) * w;
-                    sheet.data[dst..dst + w].copy_from_slice(&tile.data[src..src + w]);
-                }
-            }
-        }
-    }
-    Ok(sheet)
-}
-
-/// Writes `run/panels/step-NNNNNN.png`: per material, M's relighting | the analytic render
-/// of E's maps (both under [`PANEL_LIGHT`]) | previews of the maps.
-fn write_panel(trainer: &EstimatorTrainer, run: &Path) -> anyhow::Result<PathBuf> {
-    let dir = run.join("panels");
-    std::fs::create_dir_all(&dir).with_context(|| format!("cannot create {}", dir.display()))?;
-    let path = dir.join(format!("step-{:06}.png", trainer.steps_done()));
-    let brdf = trainer.model().brdf();
-    let mut rows = Vec::new();
-    for k in 0..PANEL_MATERIALS {
-        let seed = trainer.config().seed ^ PANEL_SEED_KEY ^ k;
-        let p = trainer.preview(seed, PANEL_LIGHT)?;
-        let mut row = vec![
-            PlanarImage::from_tensor(&p.neural)?,
-            PlanarImage::from_tensor(&p.analytic)?,
-        ];
-        row.extend(
-            map_previews(brdf.as_ref(), &p.maps)?
-                .into_iter()
-                .map(|(_, image)| image),
-        );
-        rows.push(row);
-    }
-    write_png(&path, &rows_sheet(&rows, 0.0)?, PngBits::Eight)?;
-    Ok(path)
-}
-
-/// `log.csv` header.
-const LOG_HEADER: &str = "step,stage,l1,gram,total,skipped,seconds";
-
-/// Opens `run/log.csv` for appending: a new file with the header, or on resume the existing
-/// rows up to step `keep` (rows of steps after the checkpoint are dropped: they are redone).
-fn open_log(run: &Path, keep: Option<u64>) -> anyhow::Result<std::fs::File> {
-    let path = run.join("log.csv");
-    let mut text = format!("{LOG_HEADER}\n");
-    if let Some(keep) = keep
-        && let Ok(old) = std::fs::read_to_string(&path)
-    {
-        for line in old.lines().skip(1) {
-            let step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
-            if step.is_some_and(|s| s <= keep) {
-                text.push_str(line);
-                text.push('\n');
-            }
-        }
-    }
-    photomat_core::image_io::write_atomic(&path, text.as_bytes())?;
-    std::fs::OpenOptions::new()
-        .append(true)
-        .open(&path)
-        .with_context(|| format!("cannot open {}", path.display()))
-}
-
-fn log_row(log: &mut std::fs::File, r: &StepReport, seconds: f64) -> anyhow::Result<()> {
-    writeln!(
-        log,
-        "{},{},{},{},{},{},{seconds:.4}",
-        r.step,
-        r.stage.name(),
-        r.l1,
-        r.gram,
-        r.total,
-        r.skipped
-    )
-    .context("cannot append to log.csv")
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let device = Device::Cpu;
+    let cadence = Cadence {
+        panel_every: args.panel_every,
+        checkpoint_every: args.checkpoint_every,
+    };
     let run = &args.out;
-    let state_exists = run.join(TRAIN_STATE_FILE).exists();
-    let (mut trainer, gan_dir) = if args.resume {
-        if !state_exists {
-            bail!(
-                "cannot resume: {} does not exist (start the run without --resume)",
-                run.join(TRAIN_STATE_FILE).display()
-            );
-        }
-        resumed(args, &device)?
-    } else {
-        if state_exists {
-            bail!(
-                "{} already holds an estimator run; continue it with --resume or choose another --out",
-                run.display()
-            );
-        }
-        fresh(args, &device)?
-    };
-    let mut log = if args.resume {
-        open_log(run, Some(trainer.steps_done()))?
-    } else {
-        // The model folder is complete from the start: the GAN copy, E and the settings.
-        copy_gan_model(&gan_dir, run)
-            .with_context(|| format!("cannot copy the GAN model into {}", run.display()))?;
-        checkpoint(&trainer, run, &gan_dir)?;
-        open_log(run, None)?
-    };
-    let stop = super::train_gan::stop_flag()?;
+    let mut training =
+        EstimatorTraining::open(run, &args.settings(), args.resume, cadence, &Device::Cpu)?;
+    let stop = stop_flag()?;
+    let trainer = training.trainer();
     let config = trainer.config().clone();
     let total = config.total_steps();
     let start_step = trainer.steps_done();
@@ -405,7 +147,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         "training E for {} ({} parameters) against {} ({}², batch {}, seed {}, Gram features: {}): steps {start_step} → {total} ({} aligned + {} fine-tune)",
         trainer.model().brdf().name(),
         trainer.model().estimator().config().num_parameters(),
-        gan_dir.display(),
+        training.gan_dir().display(),
         trainer.gan().config().resolution,
         config.batch,
         config.seed,
@@ -413,32 +155,14 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         config.steps,
         config.finetune_steps,
     )?;
-
-    let bar = ProgressBar::new(total).with_style(
-        ProgressStyle::with_template(
-            "{elapsed_precise} [{bar:30}] {pos}/{len} steps ({eta} left) {msg}",
-        )
-        .expect("the template is valid")
-        .progress_chars("=> "),
-    );
-    bar.set_position(start_step);
-    let mut interrupted = false;
-    let mut seconds_total = 0.0;
-    let mut last = None;
-    while !trainer.is_done() {
-        let t0 = Instant::now();
-        let report = trainer
-            .step()
-            .with_context(|| format!("training step {} failed", trainer.steps_done() + 1))?;
-        let seconds = t0.elapsed().as_secs_f64();
-        seconds_total += seconds;
+    let bar = steps_bar(total, start_step);
+    let outcome = training.run(&stop, &mut |report, seconds| {
         if report.skipped {
             bar.println(format!(
                 "step {}: loss not finite (L1 {}, Gram {}), update skipped",
                 report.step, report.l1, report.gram
             ));
         }
-        log_row(&mut log, &report, seconds)?;
         bar.set_position(report.step);
         bar.set_message(format!(
             "{} | L1 {:.4} Gram {:.4} total {:.4} | {seconds:.2} s/step",
@@ -447,46 +171,39 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             report.gram,
             report.total
         ));
-        let done = report.step;
-        last = Some(report);
-        if done % args.panel_every == 0 {
-            write_panel(&trainer, run)?;
-        }
-        if done % args.checkpoint_every == 0 {
-            checkpoint(&trainer, run, &gan_dir)?;
-        }
-        if stop.load(Ordering::SeqCst) {
-            interrupted = true;
-            break;
-        }
-    }
+    })?;
     bar.finish_and_clear();
-    checkpoint(&trainer, run, &gan_dir)?;
-    let panel = write_panel(&trainer, run)?;
-    let steps_run = trainer.steps_done() - start_step;
-    if interrupted {
+    report(run, total, &outcome, out)
+}
+
+/// The lines after a run: how it ended and where its outputs are.
+fn report(run: &Path, total: u64, o: &EstimatorOutcome, out: &mut dyn Write) -> anyhow::Result<()> {
+    if o.interrupted {
         writeln!(
             out,
             "interrupted at step {} of {total}: state saved in {}; continue with\n  photomat train-estimator --out {} --resume",
-            trainer.steps_done(),
+            o.steps_done,
             run.display(),
             run.display()
         )?;
     } else {
         writeln!(
             out,
-            "trained {steps_run} steps ({} in total){}{}",
-            trainer.steps_done(),
-            if steps_run > 0 {
-                format!(", {:.2} s/step", seconds_total / steps_run as f64)
+            "trained {} steps ({} in total){}{}",
+            o.steps_run,
+            o.steps_done,
+            if o.steps_run > 0 {
+                format!(", {:.2} s/step", o.seconds / o.steps_run as f64)
             } else {
                 String::new()
             },
-            last.map(|r| format!(
-                "; last loss: L1 {:.4}, Gram {:.4}, total {:.4}",
-                r.l1, r.gram, r.total
-            ))
-            .unwrap_or_default()
+            o.last
+                .as_ref()
+                .map(|r| format!(
+                    "; last loss: L1 {:.4}, Gram {:.4}, total {:.4}",
+                    r.l1, r.gram, r.total
+                ))
+                .unwrap_or_default()
         )?;
     }
     writeln!(
@@ -496,6 +213,6 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         run.display()
     )?;
     writeln!(out, "  {}/log.csv  losses per step", run.display())?;
-    writeln!(out, "  {}  latest panel", panel.display())?;
+    writeln!(out, "  {}  latest panel", o.panel.display())?;
     Ok(())
 }

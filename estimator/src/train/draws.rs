@@ -4,11 +4,12 @@
 //! fine-tune's rolls. A step's batch therefore does not depend on what happened before it,
 //! and a resumed run sees exactly the batches of the uninterrupted one.
 //!
-//! Lights follow DESIGN §4: the highlight `(lx, ly) ~ U(−½, ½)²` in plane coordinates
-//! ([`photomat_core::Highlight`]), the distribution the GAN's fakes use.
+//! Lights are [`LightSet::uniform`]: the highlight `(lx, ly) ~ U(−½, ½)²` in plane coordinates
+//! ([`photomat_core::Highlight`]), the distribution the GAN's fakes use
+//! (`docs/conventions.md`).
 
-use photomat_core::Highlight;
 use photomat_core::rng::SplitMix64;
+use photomat_core::{Highlight, LightSet};
 
 /// Golden-ratio increment: spreads consecutive steps over the seed space before mixing.
 const STEP_SPREAD: u64 = 0x9E37_79B9_7F4A_7C15;
@@ -34,9 +35,9 @@ impl StepDraws {
         let start = SplitMix64(seed ^ step.wrapping_mul(STEP_SPREAD)).next_u64();
         let mut rng = SplitMix64(start);
         let material_seeds = (0..batch).map(|_| rng.next_u64()).collect();
-        let highlights = (0..batch)
-            .map(|_| Highlight::new(rng.next_unit() - 0.5, rng.next_unit() - 0.5))
-            .collect();
+        let highlights = LightSet::uniform(batch, || rng.next_unit())
+            .highlights()
+            .to_vec();
         let r = resolution as u64;
         let rolls = (0..batch)
             .map(|_| ((rng.next_u64() % r) as usize, (rng.next_u64() % r) as usize))
@@ -52,6 +53,18 @@ impl StepDraws {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn lights_are_the_stream_values_shifted_by_a_half() {
+        let d = StepDraws::new(3, 7, 2, 32);
+        let start = SplitMix64(3 ^ 7u64.wrapping_mul(STEP_SPREAD)).next_u64();
+        let mut rng = SplitMix64(start);
+        let _seeds = (rng.next_u64(), rng.next_u64());
+        for h in &d.highlights {
+            let (x, y) = (rng.next_unit() - 0.5, rng.next_unit() - 0.5);
+            assert_eq!(*h, Highlight::new(x, y));
+        }
+    }
 
     #[test]
     fn draws_repeat_per_step_and_cover_the_light_square() {

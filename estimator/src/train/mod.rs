@@ -12,12 +12,14 @@
 
 pub mod config;
 pub mod draws;
+pub mod driver;
 pub mod objective;
 pub mod state;
 pub mod trainer;
 
 pub use config::{Stage, TrainConfig};
 pub use draws::StepDraws;
+pub use driver::{Cadence, EstimatorOutcome, EstimatorSettings, EstimatorTraining};
 pub use objective::{LossTerms, Objective};
 pub use state::{TRAIN_MANIFEST_FILE, TRAIN_STATE_FILE, TrainManifest, copy_gan_model};
 pub use trainer::{EstimatorTrainer, Preview, StepReport};

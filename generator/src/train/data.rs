@@ -57,16 +57,6 @@ pub trait TrainingData {
     fn sample_side(&self) -> f64;
 }
 
-/// The per-texel ω maps of `highlights` over R×R samples of the unit square.
-///
-/// # Shapes
-/// → (highlights.len(), 3, R, R), f32.
-pub fn omega_for(highlights: &[Highlight], size: usize, device: &Device) -> Result<Tensor> {
-    Ok(FlashGeometry::new(highlights, size, DType::F32, device)
-        .map_err(candle_core::Error::wrap)?
-        .omega)
-}
-
 /// The per-texel ω maps of `placements` over R×R samples, each on its own side.
 ///
 /// # Shapes

@@ -18,6 +18,7 @@
 
 pub mod config;
 pub mod data;
+pub mod driver;
 pub mod ema;
 pub mod log;
 pub mod loss;
@@ -30,4 +31,5 @@ pub mod trainer;
 pub use config::PatchTraining;
 pub use config::TrainConfig;
 pub use data::{FlashPlacement, RealBatch, TrainingData};
+pub use driver::{Cadence, GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan};
 pub use trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};

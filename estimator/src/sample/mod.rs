@@ -1,0 +1,493 @@
+//! The sampler: a complete model folder (G_ema + M + E, [`crate::EstimatorModel`] next to a
+//! [`photomat_generator::GanModel`]) turned into materials, following the reference tool's
+//! sampler (PhotoMat, Zhou et al. 2023, §3; `docs/conventions.md` for the geometry).
+//!
+//! For each seed, G turns z(seed) into a neural material F (truncation ψ), E decodes F into the
+//! maps of its BRDF model, and [`Sampler::run`] writes, under `OUT/seed-XXXX/`:
+//! - `material/`: the map folder (engine format: PNG + float EXR + material.json);
+//! - `neural.png` / `analytic.png`: M's relighting of F and the flash render of the maps under
+//!   the reference's 5 lights ([`LightSet::reference`]), side by side;
+//! - with [`SampleOptions::tileable`] (tileable models only) `tiled_2x2.png`: the maps repeated
+//!   2×2 under the centred flash; with [`SampleOptions::hextile`], `hextile_2x2.png` and
+//!   `material_hextile_2x2/`: the maps hex-tiled ([`hextile::hextile_maps`]) to 2×2 periods,
+//!   rendered the same way. The 2×2 renders show the shading maps of the innermost model (an
+//!   adapter's derived normal, so the relief keeps its slope) on the unit square, i.e. the
+//!   material at half size;
+//! - with [`SampleOptions::gltf`] / [`SampleOptions::mtlx`]: `export/material.gltf` (+ `.bin`)
+//!   / `export/material.mtlx` and their textures (`photomat_export`).
+//!
+//! Plus, for the run, `OUT/contact_sheet.png` (a row per material, the first
+//! [`SHEET_MAX_ROWS`], of map previews, the 5 analytic renders and the 5 neural renders, tiles
+//! at most [`SHEET_MAX_TILE`] pixels) and `OUT/summary.json` ([`SampleSummary`]).
+//!
+//! Seeds are S, S+1, …, S+N−1; a seed names the same material on every run (z and the noise
+//! images are drawn from the seed, `GanModel::features_for_seeds`): same seed, same files.
+//!
+//! One [`photomat_core::FlashGeometry`] of the lights is built per run and handed to both M
+//! (its ω) and the analytic renderer ([`photomat_core::render_with`]).
+//!
+//! A binary of one's own (e.g. with extra BRDF plugins linked in) samples like this:
+//!
+//! ```no_run
+//! use photomat_brdfs as _; // link the built-in plugins the model folder may name
+//! use photomat_estimator::sample::{SampleEvent, SampleOptions, Sampler};
+//!
+//! let sampler = Sampler::open("models/demo".as_ref(), &candle_core::Device::Cpu)?;
+//! let options = SampleOptions { count: 8, hextile: true, ..SampleOptions::default() };
+//! let summary = sampler.run(&options, "samples".as_ref(), &mut |event| {
+//!     if let SampleEvent::Note(line) = event {
+//!         eprintln!("{line}");
+//!     }
+//!     Ok(())
+//! })?;
+//! println!("L1 analytic vs neural: {:.4}", summary.l1_mean);
+//! # Ok::<(), anyhow::Error>(())
+//! ```
+
+pub mod hextile;
+pub mod summary;
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use candle_core::{DType, Device, Tensor};
+use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
+use photomat_core::map_files::{SaveOptions, save_maps};
+use photomat_core::plugin_spec::PluginSpec;
+use photomat_core::previews::map_previews;
+use photomat_core::sheet::{grid, resize_square};
+use photomat_core::{Brdf, FlashGeometry, LightSet, MaterialMaps, lookup, render_with};
+use photomat_generator::GanModel;
+use photomat_generator::model_files::GAN_MANIFEST_FILE;
+
+use crate::EstimatorModel;
+use crate::model_files::ESTIMATOR_MANIFEST_FILE;
+pub use summary::{MaterialSummary, SampleSummary, Timings};
+
+/// Materials shown in the contact sheet (the first ones of the run): 64 rows of 128-pixel
+/// tiles are already an 8,400-pixel-tall image; the per-material PNGs hold every material.
+pub const SHEET_MAX_ROWS: usize = 64;
+
+/// Largest tile side in the contact sheet, in pixels (tiles are shrunk to it).
+pub const SHEET_MAX_TILE: usize = 128;
+
+/// Texels relit and rendered per call: all 5 lights at up to 512² (≈ 1.3 M texels, a few
+/// hundred MB of intermediates), one light at a time above.
+pub const LIGHT_BATCH_TEXELS: usize = 5 * 512 * 512;
+
+/// Name of the contact sheet in the output folder.
+pub const CONTACT_SHEET_FILE: &str = "contact_sheet.png";
+
+/// Name of the run summary in the output folder.
+pub const SUMMARY_FILE: &str = "summary.json";
+
+/// What to sample and which extras to write.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SampleOptions {
+    /// Number of materials (at least 1).
+    pub count: usize,
+    /// First seed; material k uses seed `seed + k` (wrapping).
+    pub seed: u64,
+    /// Truncation ψ: 1 samples the full distribution, smaller values stay nearer the average.
+    pub psi: f64,
+    /// Also write `tiled_2x2.png` (the model must be tileable).
+    pub tileable: bool,
+    /// Also hex-tile the maps to 2×2 periods: `hextile_2x2.png`, `material_hextile_2x2/`.
+    pub hextile: bool,
+    /// Also write `export/material.gltf` and its textures.
+    pub gltf: bool,
+    /// Also write `export/material.mtlx` and its textures.
+    pub mtlx: bool,
+    /// Side in pixels of each render and preview in the PNG sheets (`None`: the model's
+    /// resolution); the maps keep the model's resolution.
+    pub render_size: Option<usize>,
+}
+
+impl Default for SampleOptions {
+    fn default() -> Self {
+        Self {
+            count: 4,
+            seed: 0,
+            psi: 1.0,
+            tileable: false,
+            hextile: false,
+            gltf: false,
+            mtlx: false,
+            render_size: None,
+        }
+    }
+}
+
+/// What [`Sampler::run`] reports while it works.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SampleEvent {
+    /// A line for the user (a caveat of the run or of an export mapping).
+    Note(String),
+    /// `done` of `total` materials are written.
+    Material { done: usize, total: usize },
+}
+
+/// A loaded model folder, ready to sample.
+pub struct Sampler {
+    dir: PathBuf,
+    gan: GanModel,
+    estimator: EstimatorModel,
+    /// Seconds spent loading.
+    load_seconds: f64,
+}
+
+/// Whether `dir` holds a complete model folder; otherwise the name of the first manifest that
+/// is missing.
+pub fn missing_model_file(dir: &Path) -> Option<&'static str> {
+    [GAN_MANIFEST_FILE, ESTIMATOR_MANIFEST_FILE]
+        .into_iter()
+        .find(|m| !dir.join(m).is_file())
+}
+
+impl Sampler {
+    /// Loads the model folder `dir` (gan.json + gan.safetensors, estimator.json +
+    /// estimator.safetensors) and checks that E reads the features G produces.
+    pub fn open(dir: &Path, device: &Device) -> anyhow::Result<Self> {
+        let start = Instant::now();
+        let gan = GanModel::load(dir, device)
+            .with_context(|| format!("cannot load the GAN model in '{}'", dir.display()))?;
+        let estimator = EstimatorModel::load(dir, device)
+            .with_context(|| format!("cannot load the estimator in '{}'", dir.display()))?;
+        let in_channels = estimator.estimator().config().in_channels;
+        let features = gan.config().feature_channels;
+        if in_channels != features {
+            bail!(
+                "the estimator in '{}' reads {in_channels} feature channels but the GAN produces \
+                 {features} (estimator.json and gan.json come from different runs)",
+                dir.display()
+            );
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            gan,
+            estimator,
+            load_seconds: start.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// The GAN (G_ema + M).
+    pub fn gan(&self) -> &GanModel {
+        &self.gan
+    }
+
+    /// The estimator E with its BRDF model.
+    pub fn estimator(&self) -> &EstimatorModel {
+        &self.estimator
+    }
+
+    /// The lights of the neural and analytic renders: the reference's five.
+    pub fn lights(&self) -> LightSet {
+        LightSet::reference()
+    }
+
+    /// Samples `options.count` materials into `out` (created), reporting to `progress`, and
+    /// writes `out/contact_sheet.png` and `out/summary.json`.
+    pub fn run(
+        &self,
+        options: &SampleOptions,
+        out: &Path,
+        progress: &mut dyn FnMut(SampleEvent) -> anyhow::Result<()>,
+    ) -> anyhow::Result<SampleSummary> {
+        let start = Instant::now();
+        let config = self.gan.config();
+        if !options.psi.is_finite() {
+            bail!("ψ must be a finite number, got {}", options.psi);
+        }
+        if options.count == 0 {
+            bail!("the number of materials must be at least 1");
+        }
+        if options.tileable && !config.tileable {
+            bail!(
+                "--tileable: the model in '{}' is not tileable (gan.json: architecture.tileable \
+                 = false), its materials have seams when repeated; train one with `photomat \
+                 train-gan --tileable`, or use --hextile, which hides the repetition of any \
+                 material",
+                self.dir.display()
+            );
+        }
+        let brdf = self.estimator.brdf().clone();
+        let inner = innermost(&brdf)?;
+        let resolution = config.resolution;
+        let lights = self.lights();
+        let geometry = lights.geometry(resolution, DType::F32, self.gan.device())?;
+        std::fs::create_dir_all(out)
+            .with_context(|| format!("cannot create '{}'", out.display()))?;
+        if options.hextile && !config.tileable {
+            progress(SampleEvent::Note(
+                "note: the model is not tileable; the maps' own border seam can show inside \
+                 the hexagons of hextile_2x2.png"
+                    .into(),
+            ))?;
+        }
+        let mut timings = Timings {
+            load: self.load_seconds + start.elapsed().as_secs_f64(),
+            ..Timings::default()
+        };
+        let job = Job {
+            sampler: self,
+            options,
+            brdf: &brdf,
+            inner: &inner,
+            geometry: &geometry,
+            tile: options.render_size.unwrap_or(resolution),
+        };
+        let mut rows = Vec::new();
+        let mut materials = Vec::new();
+        let mut notes_shown = false;
+        for k in 0..options.count {
+            let seed = options.seed.wrapping_add(k as u64);
+            let folder = out.join(format!("seed-{seed:04}"));
+            let want_row = rows.len() < SHEET_MAX_ROWS;
+            let material = job.material(seed, &folder, want_row, &mut timings, &mut |set| {
+                if notes_shown {
+                    return Ok(());
+                }
+                notes_shown = true;
+                for note in &set.dropped {
+                    progress(SampleEvent::Note(format!("export: dropped {note}")))?;
+                }
+                for note in &set.approximations {
+                    progress(SampleEvent::Note(format!("export: approximation: {note}")))?;
+                }
+                Ok(())
+            })?;
+            rows.extend(material.sheet_row);
+            materials.push(material.summary);
+            progress(SampleEvent::Material {
+                done: k + 1,
+                total: options.count,
+            })?;
+        }
+
+        let stage = Instant::now();
+        write_png(
+            &out.join(CONTACT_SHEET_FILE),
+            &grid(&rows, 0.0)?,
+            PngBits::Eight,
+        )?;
+        timings.write += stage.elapsed().as_secs_f64();
+        timings.total = self.load_seconds + start.elapsed().as_secs_f64();
+        let summary = SampleSummary::new(
+            self.dir.display().to_string(),
+            brdf.name(),
+            resolution,
+            options.psi,
+            config.tileable,
+            lights.highlights().iter().map(|h| [h.x, h.y]).collect(),
+            materials,
+            timings,
+        );
+        let mut text = serde_json::to_string_pretty(&summary)?;
+        text.push('\n');
+        write_atomic(&out.join(SUMMARY_FILE), text.as_bytes())?;
+        Ok(summary)
+    }
+}
+
+/// One run's fixed inputs.
+struct Job<'a> {
+    sampler: &'a Sampler,
+    options: &'a SampleOptions,
+    brdf: &'a Brdf,
+    inner: &'a Brdf,
+    geometry: &'a FlashGeometry,
+    /// Side of each render and preview in the sheets.
+    tile: usize,
+}
+
+/// One sampled material: its summary and, when asked for, its contact-sheet row.
+struct Material {
+    summary: MaterialSummary,
+    sheet_row: Option<Vec<PlanarImage>>,
+}
+
+impl Job<'_> {
+    /// Samples, renders and writes the material of `seed` into `folder`, with its contact-sheet
+    /// row when `want_row`; `exported` sees the texture set of its export, if any.
+    fn material(
+        &self,
+        seed: u64,
+        folder: &Path,
+        want_row: bool,
+        timings: &mut Timings,
+        exported: &mut dyn FnMut(&photomat_export::TextureSet) -> anyhow::Result<()>,
+    ) -> anyhow::Result<Material> {
+        let (gan, options, brdf) = (&self.sampler.gan, self.options, self.brdf);
+        let stage = Instant::now();
+        let features = gan.features_for_seeds(&[seed], options.psi)?;
+        timings.generate += stage.elapsed().as_secs_f64();
+        let stage = Instant::now();
+        let maps = self.sampler.estimator.estimate(&features)?;
+        timings.estimate += stage.elapsed().as_secs_f64();
+        let (neural, analytic) = self.renders(&features, &maps, timings)?;
+        let l1: Vec<f64> = (analytic.clone() - &neural)?
+            .abs()?
+            .flatten_from(1)?
+            .mean(1)?
+            .to_dtype(DType::F64)?
+            .to_vec1()?;
+
+        let stage = Instant::now();
+        let tile = self.tile;
+        let analytic_tiles = images(&analytic, tile)?;
+        let neural_tiles = images(&neural, tile)?;
+        let extras = (options.tileable || options.hextile)
+            .then(|| brdf.shading_maps(&maps))
+            .transpose()?;
+        let mut tiled = None;
+        let mut hex = None;
+        if let Some(shading) = &extras {
+            if options.tileable {
+                let repeated = shading.map_tensors(|t| Ok(t.repeat((1, 1, 2, 2))?))?;
+                tiled = Some(centre_render(self.inner, &repeated, 2 * tile)?);
+            }
+            if options.hextile {
+                let maps2 = hextile::hextile_maps(self.inner, shading, seed)?;
+                hex = Some((centre_render(self.inner, &maps2, 2 * tile)?, maps2));
+            }
+        }
+        timings.extras += stage.elapsed().as_secs_f64();
+
+        let stage = Instant::now();
+        save_maps(
+            &folder.join("material"),
+            brdf.as_ref(),
+            &maps,
+            &SaveOptions::default(),
+        )
+        .with_context(|| format!("cannot write the maps of seed {seed}"))?;
+        let strip = |tiles: &[PlanarImage]| grid(&[tiles.to_vec()], 0.0);
+        write_png(
+            &folder.join("neural.png"),
+            &strip(&neural_tiles)?,
+            PngBits::Eight,
+        )?;
+        write_png(
+            &folder.join("analytic.png"),
+            &strip(&analytic_tiles)?,
+            PngBits::Eight,
+        )?;
+        if let Some(image) = &tiled {
+            write_png(&folder.join("tiled_2x2.png"), image, PngBits::Eight)?;
+        }
+        if let Some((image, maps2)) = &hex {
+            write_png(&folder.join("hextile_2x2.png"), image, PngBits::Eight)?;
+            save_maps(
+                &folder.join("material_hextile_2x2"),
+                self.inner.as_ref(),
+                maps2,
+                &SaveOptions::default(),
+            )?;
+        }
+        if options.gltf || options.mtlx {
+            let export = folder.join("export");
+            let set = photomat_export::write_textures(&export, brdf.as_ref(), &maps)?;
+            if options.gltf {
+                photomat_export::write_gltf(&export, "material", &set)?;
+            }
+            if options.mtlx {
+                photomat_export::write_materialx(&export, "material", &set)?;
+            }
+            exported(&set)?;
+        }
+        timings.write += stage.elapsed().as_secs_f64();
+
+        let sheet_row = if want_row {
+            let sheet_tile = tile.min(SHEET_MAX_TILE);
+            let mut row: Vec<PlanarImage> = map_previews(brdf.as_ref(), &maps)?
+                .into_iter()
+                .map(|(_, p)| resize_square(&p, sheet_tile))
+                .collect();
+            row.extend(analytic_tiles.iter().map(|t| resize_square(t, sheet_tile)));
+            row.extend(neural_tiles.iter().map(|t| resize_square(t, sheet_tile)));
+            Some(row)
+        } else {
+            None
+        };
+        Ok(Material {
+            summary: MaterialSummary {
+                seed,
+                folder: folder.display().to_string(),
+                l1_mean: l1.iter().sum::<f64>() / l1.len() as f64,
+                l1_per_light: l1,
+            },
+            sheet_row,
+        })
+    }
+
+    /// M's relighting of `features` and the analytic render of `maps` under every light, both
+    /// display-encoded in [0, 1], from the one geometry of the run.
+    ///
+    /// # Shapes
+    /// features (1, F, R, R), maps (1, C, R, R) → two (lights, 3, R, R).
+    fn renders(
+        &self,
+        features: &Tensor,
+        maps: &MaterialMaps,
+        timings: &mut Timings,
+    ) -> anyhow::Result<(Tensor, Tensor)> {
+        let resolution = features.dim(3)?;
+        let lights = self.geometry.omega.dim(0)?;
+        // Lights in groups of at most LIGHT_BATCH_TEXELS texels: M's and the renderer's
+        // intermediates scale with the batch (5 lights of a 1024² material would hold
+        // gigabytes at once); materials up to 512² keep one call for all lights.
+        let per_call = (LIGHT_BATCH_TEXELS / (resolution * resolution)).clamp(1, lights);
+        let mut neural = Vec::new();
+        let mut analytic = Vec::new();
+        for first in (0..lights).step_by(per_call) {
+            let n = per_call.min(lights - first);
+            let group = self.geometry.narrow(first, n)?;
+            let repeated = features.repeat((n, 1, 1, 1))?;
+            let relight = Instant::now();
+            neural.push(
+                self.sampler
+                    .gan
+                    .relight()
+                    .forward(&repeated, &group.omega)?,
+            );
+            timings.relight += relight.elapsed().as_secs_f64();
+            let shade = Instant::now();
+            analytic.push(render_with(self.brdf.as_ref(), maps, &group)?);
+            timings.render += shade.elapsed().as_secs_f64();
+        }
+        let neural = Tensor::cat(&neural, 0)?.affine(0.5, 0.5)?.clamp(0.0, 1.0)?;
+        Ok((neural, Tensor::cat(&analytic, 0)?))
+    }
+}
+
+/// The innermost analytic model of `brdf` (itself unless it is an adapter such as
+/// `height(ggx)`): the model `shading_maps` returns maps for.
+fn innermost(brdf: &Brdf) -> anyhow::Result<Brdf> {
+    let mut spec = PluginSpec::parse(&brdf.name())?;
+    if spec.nested.is_empty() {
+        return Ok(brdf.clone());
+    }
+    while let Some(first) = spec.nested.first().cloned() {
+        spec = first;
+    }
+    Ok(lookup(&spec.to_string())?)
+}
+
+/// The display-encoded render of `maps` under the centred flash, resized to `side`.
+fn centre_render(brdf: &Brdf, maps: &MaterialMaps, side: usize) -> anyhow::Result<PlanarImage> {
+    let image = photomat_core::render(brdf.as_ref(), maps, &[photomat_core::Highlight::CENTER])?;
+    Ok(resize_square(&PlanarImage::from_tensor(&image)?, side))
+}
+
+/// The items of a (B, 3, R, R) batch as images resized to `side`.
+fn images(batch: &Tensor, side: usize) -> anyhow::Result<Vec<PlanarImage>> {
+    (0..batch.dim(0)?)
+        .map(|i| {
+            Ok(resize_square(
+                &PlanarImage::from_tensor(&batch.narrow(0, i, 1)?)?,
+                side,
+            ))
+        })
+        .collect()
+}

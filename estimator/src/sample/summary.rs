@@ -1,0 +1,148 @@
+//! What a sampling run reports: per material the L1 distance between the analytic and the
+//! neural render under each light, their means, and the wall time of each stage; written as
+//! `OUT/summary.json` by [`super::Sampler::run`].
+
+/// Per-stage wall time, seconds.
+#[derive(Debug, Default, Clone, serde::Serialize)]
+pub struct Timings {
+    /// Loading the model folder and preparing the output folder.
+    pub load: f64,
+    /// G: z → F.
+    pub generate: f64,
+    /// E: F → maps.
+    pub estimate: f64,
+    /// M: F ‖ ω → neural renders.
+    pub relight: f64,
+    /// The analytic flash renders of the maps.
+    pub render: f64,
+    /// The 2×2 tiled and hex-tiled renders.
+    pub extras: f64,
+    /// Writing maps, PNGs, exports and the contact sheet.
+    pub write: f64,
+    /// The whole run.
+    pub total: f64,
+}
+
+impl Timings {
+    /// The per-material stages: everything but loading.
+    pub fn per_material(&self) -> f64 {
+        self.generate + self.estimate + self.relight + self.render + self.extras + self.write
+    }
+}
+
+/// One material of the run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct MaterialSummary {
+    /// The material's seed.
+    pub seed: u64,
+    /// Its folder, `OUT/seed-XXXX`.
+    pub folder: String,
+    /// L1 analytic vs neural per light, display-encoded [0, 1].
+    pub l1_per_light: Vec<f64>,
+    /// Mean of [`Self::l1_per_light`].
+    pub l1_mean: f64,
+}
+
+/// The run: `OUT/summary.json`.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SampleSummary {
+    /// The model folder.
+    pub model: String,
+    /// The estimator's BRDF model specification.
+    pub brdf: String,
+    /// Side of F and of the maps, texels.
+    pub resolution: usize,
+    /// Truncation ψ.
+    pub psi: f64,
+    /// Whether the GAN was trained tileable.
+    pub tileable_model: bool,
+    /// Highlight positions (x, y) of the lights, in the order of the renders.
+    pub lights: Vec<[f64; 2]>,
+    /// The seeds, in order.
+    pub seeds: Vec<u64>,
+    /// One entry per material, in seed order.
+    pub materials: Vec<MaterialSummary>,
+    /// Mean over materials of the L1 per light.
+    pub l1_per_light: Vec<f64>,
+    /// Mean of [`Self::l1_per_light`].
+    pub l1_mean: f64,
+    /// Wall time per stage.
+    pub timings_s: Timings,
+    /// Materials per minute of the per-material stages.
+    pub materials_per_minute: f64,
+}
+
+impl SampleSummary {
+    /// The summary of `materials` (at least one) rendered under `lights`; the means are over
+    /// materials, then over lights.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn new(
+        model: String,
+        brdf: String,
+        resolution: usize,
+        psi: f64,
+        tileable_model: bool,
+        lights: Vec<[f64; 2]>,
+        materials: Vec<MaterialSummary>,
+        timings: Timings,
+    ) -> Self {
+        let n = materials.len() as f64;
+        let l1_per_light: Vec<f64> = (0..lights.len())
+            .map(|i| materials.iter().map(|m| m.l1_per_light[i]).sum::<f64>() / n)
+            .collect();
+        let l1_mean = l1_per_light.iter().sum::<f64>() / l1_per_light.len() as f64;
+        // The floor keeps the rate finite for a run too fast to time.
+        let materials_per_minute = 60.0 * n / timings.per_material().max(f64::MIN_POSITIVE);
+        Self {
+            model,
+            brdf,
+            resolution,
+            psi,
+            tileable_model,
+            lights,
+            seeds: materials.iter().map(|m| m.seed).collect(),
+            materials,
+            l1_per_light,
+            l1_mean,
+            timings_s: timings,
+            materials_per_minute,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn means_are_over_materials_then_lights() {
+        let m = |seed, l1: Vec<f64>| MaterialSummary {
+            seed,
+            folder: String::new(),
+            l1_mean: l1.iter().sum::<f64>() / l1.len() as f64,
+            l1_per_light: l1,
+        };
+        let timings = Timings {
+            generate: 1.0,
+            write: 2.0,
+            load: 100.0,
+            ..Timings::default()
+        };
+        let s = SampleSummary::new(
+            "m".into(),
+            "ggx".into(),
+            32,
+            1.0,
+            false,
+            vec![[0.0, 0.0], [0.1, 0.1]],
+            vec![m(3, vec![0.1, 0.3]), m(4, vec![0.3, 0.5])],
+            timings,
+        );
+        assert_eq!(s.seeds, vec![3, 4]);
+        assert!((s.l1_per_light[0] - 0.2).abs() < 1e-12);
+        assert!((s.l1_per_light[1] - 0.4).abs() < 1e-12);
+        assert!((s.l1_mean - 0.3).abs() < 1e-12);
+        // Two materials in the 3 s of per-material stages (loading excluded): 40 per minute.
+        assert!((s.materials_per_minute - 40.0).abs() < 1e-9);
+    }
+}

@@ -1,0 +1,589 @@
+//! The GAN training driver: a run folder opened fresh or resumed, the [`Trainer`] stepped to a
+//! total, and the run's cadence of checkpoints, `log.csv` rows, sample grids and SWD
+//! measurements (PhotoMat, Zhou et al. 2023, §3–4; StyleGAN2-ADA's training loop).
+//!
+//! [`GanTraining::plan`] turns [`GanSettings`] into the run's [`TrainConfig`]: a fresh run
+//! takes every setting (with the CPU-sized defaults), a resumed one keeps `train.json` and
+//! refuses a setting that contradicts it ([`RESUME_FIXED`] lists the fields that may not
+//! change; only the data folder may move). The caller opens the training data the plan names
+//! (any [`TrainingData`]), then [`GanTraining::open`] and [`GanTraining::run`], which stops
+//! after the current step when the stop flag is set (e.g. by a Ctrl-C handler) and reports to
+//! a progress callback. A resumed run continues with the same optimiser state and draws: the
+//! result is identical to an uninterrupted run.
+//!
+//! The run folder holds `train.json` + `train_state.safetensors` (every checkpoint), the GAN
+//! model folder `gan.json` + `gan.safetensors`, `log.csv` and `samples/step-NNNNNN.png`.
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use candle_core::Device;
+use photomat_core::image_io::{PngBits, write_png};
+use photomat_core::paths::absolute;
+
+use super::config::TrainConfig;
+use super::data::TrainingData;
+use super::log::{LogRow, TrainLog};
+use super::samples::sample_grid;
+use super::state::{CONFIG_FILE, STATE_FILE, read_config};
+use super::trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
+use crate::swd::{SwdConfig, SwdReport, model_swd};
+use crate::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION};
+
+/// Default model side for a fresh run (CPU-sized).
+pub const DEFAULT_SIZE: usize = 64;
+/// Default channel multiplier for a fresh run (CPU-sized; the reference is 1).
+pub const DEFAULT_MULTIPLIER: f64 = 0.25;
+/// Default batch (the reference trains 32 on 8 GPUs; 4 keeps a CPU step in seconds).
+pub const DEFAULT_BATCH: usize = 4;
+/// Key mixed into the run seed for the SWD's fixed draws (one fixed set of fakes and reals
+/// per run, so successive measurements compare).
+const SWD_SEED_KEY: u64 = 0x7472_6169_6E5F_7377; // "train_sw"
+
+/// The settings of a run; `None` keeps the default (fresh run) or the saved value (resume).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GanSettings {
+    /// Prepared data set folder (required for a fresh run; relocates it on resume).
+    pub data: Option<PathBuf>,
+    /// Model side, a power of two in 32 … 1024.
+    pub size: Option<usize>,
+    /// Channel multiplier of G and D.
+    pub multiplier: Option<f64>,
+    /// Dimension of z and w.
+    pub latent_dim: Option<usize>,
+    /// Images per step.
+    pub batch: Option<usize>,
+    /// Seed of the run.
+    pub seed: Option<u64>,
+    /// Tileable generator (`false`: not asked for).
+    pub tileable: bool,
+    /// Base learning rate.
+    pub lr: Option<f64>,
+    /// Path-length regularisation weight.
+    pub pl_weight: Option<f64>,
+    /// Learning-rate multiplier of M.
+    pub relight_lr_multiplier: Option<f64>,
+    /// R1 weight γ.
+    pub r1_gamma: Option<f64>,
+}
+
+/// The settings that a resume may not change: (flag, field of `train.json`, the given value,
+/// the saved value), both as text. The data folder is the exception: it may move.
+type FixedField = (
+    &'static str,
+    &'static str,
+    fn(&GanSettings) -> Option<String>,
+    fn(&TrainConfig) -> String,
+);
+
+/// Every setting fixed at the start of a run, with its command-line flag.
+pub const RESUME_FIXED: [FixedField; 10] = [
+    (
+        "--size",
+        "generator.resolution",
+        |s| s.size.map(|v| v.to_string()),
+        |c| c.generator.resolution.to_string(),
+    ),
+    (
+        "--multiplier",
+        "generator.channel_multiplier",
+        |s| s.multiplier.map(|v| v.to_string()),
+        |c| c.generator.channel_multiplier.to_string(),
+    ),
+    (
+        "--latent-dim",
+        "generator.latent_dim",
+        |s| s.latent_dim.map(|v| v.to_string()),
+        |c| c.generator.latent_dim.to_string(),
+    ),
+    (
+        "--relight-lr-multiplier",
+        "generator.relight_lr_multiplier",
+        |s| s.relight_lr_multiplier.map(|v| v.to_string()),
+        |c| c.generator.relight_lr_multiplier.to_string(),
+    ),
+    (
+        "--tileable",
+        "generator.tileable",
+        |s| s.tileable.then(|| "true".to_string()),
+        |c| c.generator.tileable.to_string(),
+    ),
+    (
+        "--batch",
+        "batch",
+        |s| s.batch.map(|v| v.to_string()),
+        |c| c.batch.to_string(),
+    ),
+    (
+        "--seed",
+        "seed",
+        |s| s.seed.map(|v| v.to_string()),
+        |c| c.seed.to_string(),
+    ),
+    (
+        "--lr",
+        "lr",
+        |s| s.lr.map(|v| v.to_string()),
+        |c| c.lr.to_string(),
+    ),
+    (
+        "--r1-gamma",
+        "r1_gamma",
+        |s| s.r1_gamma.map(|v| v.to_string()),
+        |c| c.r1_gamma.to_string(),
+    ),
+    (
+        "--pl-weight",
+        "pl_weight",
+        |s| s.pl_weight.map(|v| v.to_string()),
+        |c| c.pl_weight.to_string(),
+    ),
+];
+
+/// How long a run trains.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum RunLength {
+    /// Total steps (a resumed run continues up to this count).
+    Steps(u64),
+    /// Total thousands of real images: ⌈1000·K / batch⌉ steps.
+    Kimg(f64),
+}
+
+impl RunLength {
+    /// Total steps at `batch` images per step.
+    pub fn steps(self, batch: usize) -> anyhow::Result<u64> {
+        match self {
+            RunLength::Steps(s) => Ok(s),
+            RunLength::Kimg(k) if k.is_finite() && k > 0.0 => {
+                Ok((k * 1000.0 / batch as f64).ceil() as u64)
+            }
+            RunLength::Kimg(k) => bail!("--kimg {k} must be positive"),
+        }
+    }
+}
+
+/// Steps between the run's periodic outputs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Cadence {
+    /// Steps between checkpoints (state and GAN model folder); at least 1.
+    pub checkpoint_every: u64,
+    /// Steps between sample grids; at least 1.
+    pub sample_every: u64,
+    /// Steps between SWD measurements (0: never).
+    pub swd_every: u64,
+    /// Fakes and real crops per SWD measurement.
+    pub swd_count: u64,
+}
+
+impl Default for Cadence {
+    fn default() -> Self {
+        Self {
+            checkpoint_every: 500,
+            sample_every: 500,
+            swd_every: 1000,
+            swd_count: 64,
+        }
+    }
+}
+
+/// The configuration a run will train with.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunPlan {
+    /// The full configuration (`train.json`).
+    pub config: TrainConfig,
+    /// Whether the run continues from its checkpoint.
+    pub resume: bool,
+    /// Lines for the user (e.g. a relocated data set).
+    pub notes: Vec<String>,
+}
+
+/// What [`GanTraining::run`] reports while it works.
+#[derive(Debug)]
+pub enum GanEvent<'a> {
+    /// A step finished: its statistics, wall seconds, steps done and kimg seen.
+    Step {
+        stats: &'a StepStats,
+        seconds: f64,
+        done: u64,
+        kimg: f64,
+    },
+    /// A step skipped an update (a non-finite loss or gradient).
+    Skipped { step: u64, reason: &'a str },
+    /// An SWD measurement of `count` images starts.
+    SwdStarted { count: u64 },
+    /// The SWD measurement progressed.
+    SwdProgress,
+    /// An SWD measurement finished after step `step`.
+    Swd { step: u64, report: &'a SwdReport },
+}
+
+/// How a [`GanTraining::run`] ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GanOutcome {
+    /// Whether the stop flag ended it before the total.
+    pub interrupted: bool,
+    /// Steps run by this call.
+    pub steps_run: u64,
+    /// Steps done in total.
+    pub steps_done: u64,
+    /// Thousands of real images seen in total.
+    pub kimg: f64,
+    /// Wall seconds of this call's steps.
+    pub seconds: f64,
+    /// Their phases, summed.
+    pub phases: PhaseSeconds,
+    /// The last sample grid.
+    pub samples: PathBuf,
+}
+
+/// A GAN training run in its folder.
+pub struct GanTraining {
+    trainer: Trainer,
+    run: PathBuf,
+    log: TrainLog,
+    cadence: Cadence,
+    total: u64,
+    device: Device,
+}
+
+impl GanTraining {
+    /// The configuration of the run in `run`: from `settings` for a fresh run (an error if
+    /// `run` already holds one), from `run/train.json` on `resume` after checking that no
+    /// setting contradicts it.
+    pub fn plan(run: &Path, settings: &GanSettings, resume: bool) -> anyhow::Result<RunPlan> {
+        let state = run.join(STATE_FILE);
+        if resume && !state.exists() {
+            bail!(
+                "cannot resume: {} does not exist (start the run without --resume)",
+                state.display()
+            );
+        }
+        if !resume && state.exists() {
+            bail!(
+                "{} already holds a training run; continue it with --resume or choose another --out",
+                run.display()
+            );
+        }
+        if resume {
+            resumed_config(run, settings)
+        } else {
+            Ok(RunPlan {
+                config: fresh_config(settings)?,
+                resume,
+                notes: Vec::new(),
+            })
+        }
+    }
+
+    /// Opens the run of `plan` in `run` (created) to train up to `total` steps: a fresh run
+    /// writes its first checkpoint at once, a resumed one loads its state and keeps the log
+    /// rows up to it.
+    pub fn open(
+        run: &Path,
+        plan: RunPlan,
+        total: u64,
+        cadence: Cadence,
+        device: &Device,
+    ) -> anyhow::Result<Self> {
+        // Before any backward pass of this thread (the R1 penalty is a double backward).
+        enable_second_order_gradients();
+        std::fs::create_dir_all(run).with_context(|| format!("cannot create {}", run.display()))?;
+        let mut trainer = Trainer::new(plan.config, device)?;
+        let log_path = run.join("log.csv");
+        let log = if plan.resume {
+            trainer.load_state(run)?;
+            TrainLog::resume(&log_path, trainer.steps_done())?
+        } else {
+            // The configuration is on disk from the start, so a crash before the first
+            // checkpoint still leaves a folder that says what it was.
+            checkpoint(&trainer, run)?;
+            TrainLog::create(&log_path)?
+        };
+        Ok(Self {
+            trainer,
+            run: run.to_path_buf(),
+            log,
+            cadence,
+            total,
+            device: device.clone(),
+        })
+    }
+
+    /// The trainer (configuration, counters, models).
+    pub fn trainer(&self) -> &Trainer {
+        &self.trainer
+    }
+
+    /// The total steps the run trains to.
+    pub fn total(&self) -> u64 {
+        self.total
+    }
+
+    /// Trains on `data` until the total or until `stop` is set (checked after each step),
+    /// then checkpoints and writes a sample grid.
+    pub fn run(
+        &mut self,
+        data: &dyn TrainingData,
+        stop: &AtomicBool,
+        progress: &mut dyn FnMut(GanEvent<'_>),
+    ) -> anyhow::Result<GanOutcome> {
+        let start_step = self.trainer.steps_done();
+        let mut interrupted = false;
+        let mut seconds_total = 0.0;
+        let mut phases = PhaseSeconds::default();
+        while self.trainer.steps_done() < self.total {
+            let t0 = Instant::now();
+            let stats = self.trainer.step(data).with_context(|| {
+                format!("training step {} failed", self.trainer.steps_done() + 1)
+            })?;
+            let seconds = t0.elapsed().as_secs_f64();
+            seconds_total += seconds;
+            let p = stats.seconds;
+            phases.g += p.g;
+            phases.d += p.d;
+            phases.data += p.data;
+            phases.r1 += p.r1;
+            phases.ema += p.ema;
+            for reason in &stats.skipped {
+                progress(GanEvent::Skipped {
+                    step: stats.step + 1,
+                    reason: reason.as_str(),
+                });
+            }
+            let done = self.trainer.steps_done();
+            let kimg = self.trainer.images_seen() as f64 / 1000.0;
+            let swd = self.swd_at(done, data, progress)?;
+            self.log.append(&LogRow {
+                step: done,
+                kimg,
+                loss_g: stats.loss_g,
+                loss_d: stats.loss_d,
+                real_logit: stats.real_logit,
+                fake_logit: stats.fake_logit,
+                r1: stats.r1,
+                seconds,
+                swd,
+                path_length: stats.path_length,
+            })?;
+            progress(GanEvent::Step {
+                stats: &stats,
+                seconds,
+                done,
+                kimg,
+            });
+            if done % self.cadence.sample_every == 0 {
+                self.write_samples(data)?;
+            }
+            if done % self.cadence.checkpoint_every == 0 {
+                checkpoint(&self.trainer, &self.run)?;
+            }
+            if stop.load(Ordering::SeqCst) {
+                interrupted = true;
+                break;
+            }
+        }
+        checkpoint(&self.trainer, &self.run)?;
+        let samples = self.write_samples(data)?;
+        Ok(GanOutcome {
+            interrupted,
+            steps_run: self.trainer.steps_done() - start_step,
+            steps_done: self.trainer.steps_done(),
+            kimg: self.trainer.images_seen() as f64 / 1000.0,
+            seconds: seconds_total,
+            phases,
+            samples,
+        })
+    }
+
+    /// The SWD×10³ of G_ema when step `done` is on the SWD cadence.
+    fn swd_at(
+        &self,
+        done: u64,
+        data: &dyn TrainingData,
+        progress: &mut dyn FnMut(GanEvent<'_>),
+    ) -> anyhow::Result<Option<f64>> {
+        let every = self.cadence.swd_every;
+        if every == 0 || done % every != 0 {
+            return Ok(None);
+        }
+        let count = self.cadence.swd_count;
+        progress(GanEvent::SwdStarted { count });
+        let report = model_swd(
+            self.trainer.ema_model(),
+            data,
+            count as usize,
+            self.trainer.config().seed ^ SWD_SEED_KEY,
+            &SwdConfig::default(),
+            &mut |_, _| progress(GanEvent::SwdProgress),
+        )
+        .context("cannot measure the SWD")?;
+        progress(GanEvent::Swd {
+            step: done,
+            report: &report,
+        });
+        Ok(Some(report.mean))
+    }
+
+    /// Writes `run/samples/step-NNNNNN.png`.
+    fn write_samples(&self, data: &dyn TrainingData) -> anyhow::Result<PathBuf> {
+        let dir = self.run.join("samples");
+        std::fs::create_dir_all(&dir)
+            .with_context(|| format!("cannot create {}", dir.display()))?;
+        let path = dir.join(format!("step-{:06}.png", self.trainer.steps_done()));
+        let trainer = &self.trainer;
+        let grid = sample_grid(
+            trainer.ema_model(),
+            data,
+            trainer.config().seed,
+            &self.device,
+        )?;
+        write_png(&path, &grid, PngBits::Eight)?;
+        Ok(path)
+    }
+}
+
+/// The configuration of a fresh run from `settings`, with the reference hyper-parameters.
+fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
+    let Some(data) = &settings.data else {
+        bail!("--data DATASET is required for a new run (a prepared data set folder)");
+    };
+    let size = settings.size.unwrap_or(DEFAULT_SIZE);
+    if !size.is_power_of_two() || !(MIN_RESOLUTION..=MAX_RESOLUTION).contains(&size) {
+        bail!(
+            "--size {size} is not supported: use a power of two in {MIN_RESOLUTION} … \
+             {MAX_RESOLUTION} (32, 64, 128, 256, 512, 1024)"
+        );
+    }
+    let defaults = GeneratorConfig::default();
+    let generator = GeneratorConfig {
+        resolution: size,
+        channel_multiplier: settings.multiplier.unwrap_or(DEFAULT_MULTIPLIER),
+        tileable: settings.tileable,
+        latent_dim: settings.latent_dim.unwrap_or(defaults.latent_dim),
+        relight_lr_multiplier: settings
+            .relight_lr_multiplier
+            .unwrap_or(defaults.relight_lr_multiplier),
+        ..defaults
+    };
+    let mut config = TrainConfig::new(
+        generator,
+        absolute(data),
+        settings.batch.unwrap_or(DEFAULT_BATCH),
+        settings.seed.unwrap_or(0),
+    );
+    if let Some(lr) = settings.lr {
+        config.lr = lr;
+    }
+    if let Some(w) = settings.pl_weight {
+        config.pl_weight = w;
+    }
+    if let Some(gamma) = settings.r1_gamma {
+        config.r1_gamma = gamma;
+    }
+    config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("invalid training settings: {e}"))?;
+    Ok(config)
+}
+
+/// The saved configuration of `run`, after checking [`RESUME_FIXED`]. `data` relocates a data
+/// set that was moved since the run started (the photos are the user's to keep the same); the
+/// new path is saved at the next checkpoint.
+fn resumed_config(run: &Path, settings: &GanSettings) -> anyhow::Result<RunPlan> {
+    let mut saved = read_config(run)?;
+    let mut notes = Vec::new();
+    if let Some(data) = &settings.data {
+        let moved = absolute(data);
+        if moved != saved.data {
+            notes.push(format!(
+                "note: data set relocated from {} to {}",
+                saved.data.display(),
+                moved.display()
+            ));
+            saved.data = moved;
+        }
+    }
+    let conflicts: Vec<String> = RESUME_FIXED
+        .iter()
+        .filter_map(|(flag, field, given, fixed)| {
+            let (given, fixed) = (given(settings)?, fixed(&saved));
+            (given != fixed)
+                .then(|| format!("{flag} {given} contradicts {field} = {fixed} of the run"))
+        })
+        .collect();
+    if !conflicts.is_empty() {
+        bail!(
+            "cannot resume {}: {} (leave the flag out to keep the run's value)",
+            run.join(CONFIG_FILE).display(),
+            conflicts.join("; ")
+        );
+    }
+    Ok(RunPlan {
+        config: saved,
+        resume: true,
+        notes,
+    })
+}
+
+/// The provenance recorded in the GAN model folder.
+fn provenance(trainer: &Trainer) -> serde_json::Value {
+    let c = trainer.config();
+    serde_json::json!({
+        "trained_by": "photomat train-gan",
+        "step": trainer.steps_done(),
+        "kimg": trainer.images_seen() as f64 / 1000.0,
+        "data": c.data,
+        "seed": c.seed,
+        "batch": c.batch,
+    })
+}
+
+/// Writes the training state and the GAN model folder into `run`.
+fn checkpoint(trainer: &Trainer, run: &Path) -> anyhow::Result<()> {
+    trainer
+        .save_state(run)
+        .with_context(|| format!("cannot save the training state in {}", run.display()))?;
+    trainer
+        .save_model(run, provenance(trainer))
+        .with_context(|| format!("cannot save the GAN model in {}", run.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn kimg_rounds_up_to_whole_steps() {
+        assert_eq!(RunLength::Steps(7).steps(4).unwrap(), 7);
+        assert_eq!(RunLength::Kimg(0.01).steps(4).unwrap(), 3);
+        assert_eq!(RunLength::Kimg(0.008).steps(4).unwrap(), 2);
+        assert!(RunLength::Kimg(0.0).steps(4).is_err());
+        assert!(RunLength::Kimg(f64::NAN).steps(4).is_err());
+    }
+
+    #[test]
+    fn resume_table_names_every_contradicted_field() {
+        let saved = TrainConfig::new(GeneratorConfig::default(), PathBuf::from("d"), 4, 3);
+        let same = GanSettings {
+            batch: Some(4),
+            seed: Some(3),
+            ..GanSettings::default()
+        };
+        let changed = GanSettings {
+            batch: Some(8),
+            tileable: true,
+            ..same.clone()
+        };
+        let conflicts = |s: &GanSettings| -> Vec<&str> {
+            RESUME_FIXED
+                .iter()
+                .filter(|(_, _, given, fixed)| given(s).is_some_and(|g| g != fixed(&saved)))
+                .map(|(_, field, _, _)| *field)
+                .collect()
+        };
+        assert!(conflicts(&same).is_empty());
+        assert_eq!(conflicts(&changed), ["generator.tileable", "batch"]);
+    }
+}
