@@ -1,5 +1,5 @@
 //! `photomat train-gan --data DATASET --out RUN (--steps N | --kimg K) [--size 64]
-//! [--multiplier 0.25] [--batch 4] [--seed S] [--tileable] [--lr 0.0025] [--pl-weight W]
+//! [--multiplier 0.25] [--batch 4] [--seed S] [--tileable | --spatial] [--lr 0.0025] [--pl-weight W]
 //! [--checkpoint-every N] [--sample-every N] [--swd-every N] [--swd-count N] [--resume]`: trains the
 //! relightable generator G, the relighting MLP M and the light-conditioned discriminator D on
 //! a prepared flash-photo data set (PhotoMat §3–4). The run is the library's
@@ -104,6 +104,24 @@ pub struct Args {
     #[arg(long, value_name = "GAMMA")]
     pub r1_gamma: Option<f64>,
 
+    /// Spatial (any-size) generator: a field of local latents replaces the 4×4 constant, and
+    /// the run trains on --size × --size patches cut from the photos at their prepared
+    /// resolution (no shrinking), each with the photo's own flash geometry. Implies
+    /// --tileable. The model then samples materials of any multiple of size/4 texels.
+    #[arg(long)]
+    pub spatial: bool,
+
+    /// Channels of the spatial generator's local latents (one vector per size/4 cell)
+    /// [default: 32].
+    #[arg(long, value_name = "N", requires = "spatial",
+          value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub local_dim: Option<u32>,
+
+    /// Probability that a training patch holds the photo's highlight [default: 0.5]; under
+    /// uniform positions a 64² patch of a 512² photo holds it in about 2 % of draws.
+    #[arg(long, value_name = "P", requires = "spatial")]
+    pub highlight_prob: Option<f64>,
+
     /// Steps between checkpoints (state, GAN model folder).
     #[arg(long, value_name = "N", default_value_t = 500,
           value_parser = clap::value_parser!(u64).range(1..))]
@@ -144,6 +162,9 @@ impl Args {
             pl_weight: self.pl_weight,
             relight_lr_multiplier: self.relight_lr_multiplier,
             r1_gamma: self.r1_gamma,
+            spatial: self.spatial,
+            local_dim: self.local_dim.map(|v| v as usize),
+            highlight_prob: self.highlight_prob,
         }
     }
 

@@ -30,7 +30,7 @@ use super::samples::sample_grid;
 use super::state::{CONFIG_FILE, STATE_FILE, read_config};
 use super::trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
 use crate::swd::{SwdConfig, SwdReport, model_swd};
-use crate::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION};
+use crate::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION, SpatialConfig};
 
 /// Default model side for a fresh run (CPU-sized).
 pub const DEFAULT_SIZE: usize = 64;
@@ -67,6 +67,13 @@ pub struct GanSettings {
     pub relight_lr_multiplier: Option<f64>,
     /// R1 weight γ.
     pub r1_gamma: Option<f64>,
+    /// Spatial (any-size) generator trained on native-scale patches (`false`: not asked for).
+    /// Implies a tileable generator (docs/conventions.md, "Spatial generator").
+    pub spatial: bool,
+    /// Channels of a spatial generator's local latents.
+    pub local_dim: Option<usize>,
+    /// Probability that a training patch holds the photo's highlight.
+    pub highlight_prob: Option<f64>,
 }
 
 /// The settings that a resume may not change: (flag, field of `train.json`, the given value,
@@ -79,7 +86,7 @@ type FixedField = (
 );
 
 /// Every setting fixed at the start of a run, with its command-line flag.
-pub const RESUME_FIXED: [FixedField; 10] = [
+pub const RESUME_FIXED: [FixedField; 13] = [
     (
         "--size",
         "generator.resolution",
@@ -109,6 +116,33 @@ pub const RESUME_FIXED: [FixedField; 10] = [
         "generator.tileable",
         |s| s.tileable.then(|| "true".to_string()),
         |c| c.generator.tileable.to_string(),
+    ),
+    (
+        "--spatial",
+        "generator.spatial",
+        |s| s.spatial.then(|| "true".to_string()),
+        |c| c.generator.spatial.is_some().to_string(),
+    ),
+    (
+        "--local-dim",
+        "generator.spatial.local_dim",
+        |s| s.local_dim.map(|v| v.to_string()),
+        |c| {
+            c.generator
+                .spatial
+                .as_ref()
+                .map_or("none".into(), |s| s.local_dim.to_string())
+        },
+    ),
+    (
+        "--highlight-prob",
+        "patches.highlight_prob",
+        |s| s.highlight_prob.map(|v| v.to_string()),
+        |c| {
+            c.patches
+                .as_ref()
+                .map_or("none".into(), |p| p.highlight_prob.to_string())
+        },
     ),
     (
         "--batch",
@@ -457,10 +491,21 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
         );
     }
     let defaults = GeneratorConfig::default();
+    if !settings.spatial && (settings.local_dim.is_some() || settings.highlight_prob.is_some()) {
+        bail!("--local-dim and --highlight-prob configure a spatial generator: add --spatial");
+    }
+    let spatial = settings.spatial.then(|| SpatialConfig {
+        local_dim: settings
+            .local_dim
+            .unwrap_or(SpatialConfig::default().local_dim),
+        ..SpatialConfig::default()
+    });
     let generator = GeneratorConfig {
         resolution: size,
         channel_multiplier: settings.multiplier.unwrap_or(DEFAULT_MULTIPLIER),
-        tileable: settings.tileable,
+        // A spatial G is translation-equivariant only with wrap-around padding.
+        tileable: settings.tileable || settings.spatial,
+        spatial,
         latent_dim: settings.latent_dim.unwrap_or(defaults.latent_dim),
         relight_lr_multiplier: settings
             .relight_lr_multiplier
@@ -481,6 +526,9 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
     }
     if let Some(gamma) = settings.r1_gamma {
         config.r1_gamma = gamma;
+    }
+    if let (Some(p), Some(patches)) = (settings.highlight_prob, config.patches.as_mut()) {
+        patches.highlight_prob = p;
     }
     config
         .validate()
