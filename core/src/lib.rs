@@ -1,12 +1,13 @@
 //! # photomat-core
 //!
-//! The conventions every photomat crate shares (`shared/DESIGN.md` §2–3): the
+//! The conventions every photomat crate shares (`docs/conventions.md`): the
 //! [`DifferentiableBrdf`] trait and its parameter specs, the plugin [`registry`], the shared
 //! [`microfacet`] maths, the collocated-[`flash`] plane geometry, the differentiable
-//! [`render`]er and the material-map folder format ([`map_files`]).
+//! [`render`]er, the material-map folder format ([`map_files`]) and the conformance kit
+//! every plugin's tests run ([`testing`]).
 //!
-//! Models live in `photomat-brdfs` (and in users' own crates); they register themselves with
-//! [`register_brdf!`] and are built by name with [`lookup`]:
+//! Models live in `photomat-brdfs` (and in users' own crates); each declares itself once
+//! with [`register_brdf!`] and is built by name with [`lookup`]:
 //!
 //! ```ignore
 //! use photomat_brdfs as _; // link the built-in plugins
@@ -24,11 +25,13 @@ pub mod lobes;
 pub mod map_files;
 pub mod maps;
 pub mod microfacet;
+pub mod model;
 pub mod param;
 pub mod plugin_spec;
 pub mod registry;
 pub mod render;
 pub mod shading;
+pub mod testing;
 pub mod vecops;
 
 pub use adapter::{AdaptedBrdf, MapAdapter};
@@ -36,8 +39,12 @@ pub use brdf::{Brdf, DifferentiableBrdf};
 pub use error::{Error, Result};
 pub use flash::{FlashGeometry, Highlight};
 pub use maps::MaterialMaps;
+pub use model::{ModelBrdf, Reflectance};
 pub use param::{ColorSpace, Encoding, ParamSpec};
-pub use registry::{ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations};
+pub use registry::{
+    ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations,
+    registrations_from,
+};
 pub use render::{encode_display, render, render_radiance, render_radiance_with};
 pub use shading::ShadingGeometry;
 

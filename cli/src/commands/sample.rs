@@ -35,8 +35,7 @@ use candle_core::{DType, Device, Tensor};
 use indicatif::{ProgressBar, ProgressStyle};
 use photomat_core::image_io::{CONTACT_SHEET_GAP, PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
-use photomat_core::plugin_spec::PluginSpec;
-use photomat_core::{Brdf, ColorSpace, FlashGeometry, Highlight, MaterialMaps, lookup, render};
+use photomat_core::{Brdf, ColorSpace, FlashGeometry, Highlight, MaterialMaps, render};
 use photomat_estimator::EstimatorModel;
 use photomat_export::hextile::{Content, HexTiling, hextile};
 use photomat_generator::GanModel;
@@ -230,7 +229,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         );
     }
     let brdf = estimator.brdf().clone();
-    let inner = innermost(&brdf)?;
+    let inner = brdf.innermost();
     let resolution = config.resolution;
     let tile = args.size_render.map_or(resolution, |s| s as usize);
     let lights = reference_lights();
@@ -463,19 +462,6 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         summary.materials_per_minute
     )?;
     Ok(())
-}
-
-/// The innermost analytic model of `brdf` (itself unless it is an adapter such as
-/// `height(ggx)`): the model `shading_maps` returns maps for.
-fn innermost(brdf: &Brdf) -> anyhow::Result<Brdf> {
-    let mut spec = PluginSpec::parse(&brdf.name())?;
-    if spec.nested.is_empty() {
-        return Ok(brdf.clone());
-    }
-    while let Some(first) = spec.nested.first().cloned() {
-        spec = first;
-    }
-    Ok(lookup(&spec.to_string())?)
 }
 
 /// Hex-tile the maps of `brdf` to 2×2 periods with one lattice seeded by `seed`; the diffuse
