@@ -302,7 +302,7 @@ fn build(spec: &PluginSpec, full_text: &str) -> Result<Brdf> {
     }
     .to_string();
     let args = BrdfArgs {
-        registration: *reg,
+        registration: reg,
         canonical,
         nested,
         values,
