@@ -7,7 +7,8 @@
 //! RAYON_NUM_THREADS=1 cargo bench -p photomat-brdfs --bench eval_throughput
 //! ```
 //!
-//! Per model (`lambert`, `ggx`, `coated`, `height(ggx)`), in the group `eval_256`:
+//! Per built-in configuration (`coated`, `ggx`, `lambert`, `height(ggx)`), in the group
+//! `eval_256`:
 //! - `baseline/<model>`: one element-wise multiply of two (1, 3, 256, 256) tensors — the cost of
 //!   a single candle op over an RGB image, measured in the same process right before the model
 //!   so results can be reported as ratios that partly cancel machine and load differences;
@@ -35,52 +36,20 @@ use std::time::Duration;
 
 use candle_core::{DType, Device, Tensor, Var};
 use criterion::{BenchmarkId, Criterion, Throughput};
-use photomat_core::rng::SplitMix64;
-use photomat_core::{Encoding, FlashGeometry, Highlight, MaterialMaps, lookup, render_radiance};
+use photomat_core::testing::{random_maps, rng};
+use photomat_core::{FlashGeometry, Highlight, MaterialMaps, lookup, render_radiance};
 
-// Linking pitfall (DESIGN §3): name the plugin crate so the registry sees its models.
-use photomat_brdfs as _;
+// Linking pitfall (see `photomat_core::registry`): name the plugin crate so the registry sees its models.
+use photomat_brdfs::builtin_configurations;
 
 /// Map resolution: 256² texels, the paper's smallest model size.
 const SIZE: usize = 256;
-/// The built-in model configurations, as the estimator would name them.
-const MODELS: &[&str] = &["lambert", "ggx", "coated", "height(ggx)"];
 /// Off-centre flash, so that no symmetry makes the work atypical.
 const LIGHT: Highlight = Highlight { x: 0.1, y: -0.1 };
 
-/// Reproducible random maps from the workspace's seeded generator (SplitMix64).
-struct Rng(SplitMix64);
-
-impl Rng {
-    /// Uniform in [lo, hi) from the top 24 bits (an f32's mantissa).
-    fn uniform(&mut self, lo: f32, hi: f32) -> f32 {
-        lo + (hi - lo) * ((self.0.next_u64() >> 40) as f32 / (1u64 << 24) as f32)
-    }
-}
-
-/// Maps of `size`² drawn uniformly over each spec's range; normals tilted by at most ≈ 27°
-/// (x, y ∈ [−½, ½], z = 1; the models normalise them).
-fn random_maps(specs: &[photomat_core::ParamSpec], size: usize, rng: &mut Rng) -> MaterialMaps {
-    let plane = size * size;
-    let mut maps = MaterialMaps::new();
-    for spec in specs {
-        let data: Vec<f32> = (0..spec.channels * plane)
-            .map(|i| match spec.encoding {
-                Encoding::UnitNormal if i / plane == 2 => 1.0,
-                Encoding::UnitNormal => rng.uniform(-0.5, 0.5),
-                _ => rng.uniform(spec.range.0, spec.range.1),
-            })
-            .collect();
-        let map = Tensor::from_vec(data, (1, spec.channels, size, size), &Device::Cpu)
-            .expect("shape matches the data");
-        maps.insert(spec.name, map);
-    }
-    maps
-}
-
 fn eval_throughput(c: &mut Criterion) {
     let device = Device::Cpu;
-    let mut rng = Rng(SplitMix64(2023));
+    let mut rng = rng(2023);
     let mut group = c.benchmark_group("eval_256");
     group.throughput(Throughput::Elements((SIZE * SIZE) as u64));
 
@@ -92,10 +61,13 @@ fn eval_throughput(c: &mut Criterion) {
     let omega = &geometry.omega;
     let a = Tensor::ones((1, 3, SIZE, SIZE), DType::F32, &device).unwrap();
     let a2 = (&a * 0.5).unwrap();
-    for &spec in MODELS {
+    // Every built-in model and adapter configuration, as the estimator would name them.
+    for spec in &builtin_configurations().unwrap() {
+        let spec = spec.as_str();
         let brdf = lookup(spec).unwrap_or_else(|e| panic!("{e}"));
         let defaults = MaterialMaps::defaults(brdf.params(), 1, SIZE, DType::F32, &device).unwrap();
-        let random = random_maps(brdf.params(), SIZE, &mut rng);
+        // Uniform over each spec's range; normals tilted by at most ≈ 27°.
+        let random = random_maps(&brdf, &mut rng, SIZE, 0.0, DType::F32).unwrap();
         let vars: Vec<(String, Var)> = random
             .iter()
             .map(|(name, t)| (name.to_string(), Var::from_tensor(t).unwrap()))

@@ -17,56 +17,31 @@
 //! n = 3 + 2·(3 + 1) = 11, as in the paper.
 //! Usage: `photomat render --maps DIR --brdf coated --orbit 8 --out sheet.png`.
 
-use std::sync::Arc;
-
 use candle_core::Tensor;
 use photomat_core::lobes::{ggx_specular, lambert};
+use photomat_core::param::common::{DIFFUSE, ROUGHNESS, SPECULAR};
 use photomat_core::vecops::constant3;
-use photomat_core::{
-    Brdf, BrdfArgs, BrdfRegistration, ColorSpace, DifferentiableBrdf, Encoding, MaterialMaps,
-    ParamSpec, Result, ShadingGeometry, register_brdf,
+use photomat_core::{MaterialMaps, ParamSpec, Reflectance, Result, ShadingGeometry, register_brdf};
+
+/// The second lobe's specular albedo: [`SPECULAR`] under its own name and documentation.
+const SPECULAR2: ParamSpec = ParamSpec {
+    name: "specular2",
+    doc: "second lobe's specular albedo (Schlick F0), e.g. the clear coat",
+    ..SPECULAR
 };
 
-use crate::common::{DIFFUSE, ROUGHNESS, SPECULAR};
-
-const PARAMS: &[ParamSpec] = &[
-    DIFFUSE,
-    SPECULAR,
-    ROUGHNESS,
-    ParamSpec {
-        name: "specular2",
-        channels: 3,
-        range: (0.0, 1.0),
-        encoding: Encoding::Gamma22,
-        color_space: ColorSpace::Gamma22,
-        default: &[0.04, 0.04, 0.04],
-        differentiable: true,
-        doc: "second lobe's specular albedo (Schlick F0), e.g. the clear coat",
-    },
-    ParamSpec {
-        name: "roughness2",
-        channels: 1,
-        range: (0.0, 1.0),
-        encoding: Encoding::Linear,
-        color_space: ColorSpace::Linear,
-        default: &[0.1],
-        differentiable: true,
-        doc: "second lobe's perceptual roughness, α = max(r², 1e-4)",
-    },
-];
+/// The second lobe's roughness: [`ROUGHNESS`] with a sharper default (the clear coat).
+const ROUGHNESS2: ParamSpec = ParamSpec {
+    name: "roughness2",
+    default: &[0.1],
+    doc: "second lobe's perceptual roughness, α = max(r², 1e-4)",
+    ..ROUGHNESS
+};
 
 /// Lambert + two GGX lobes, flat normal.
 pub struct Coated;
 
-impl DifferentiableBrdf for Coated {
-    fn name(&self) -> String {
-        "coated".into()
-    }
-
-    fn params(&self) -> &[ParamSpec] {
-        PARAMS
-    }
-
+impl Reflectance for Coated {
     fn eval(&self, wi: &Tensor, wo: &Tensor, maps: &MaterialMaps) -> Result<Tensor> {
         let up = constant3([0.0, 0.0, 1.0], wi)?;
         let geometry = ShadingGeometry::new(wi, wo, &up)?;
@@ -77,16 +52,9 @@ impl DifferentiableBrdf for Coated {
     }
 }
 
-fn construct(_: &BrdfArgs) -> Result<Brdf> {
-    Ok(Arc::new(Coated))
-}
-
-register_brdf!(BrdfRegistration {
+register_brdf! {
     name: "coated",
     summary: "car paint: Lambert + two GGX lobes with own rgb F0 and roughness, flat normal",
-    params: PARAMS,
-    replaces: &[],
-    takes_nested: false,
-    args: &[],
-    construct,
-});
+    params: &[DIFFUSE, SPECULAR, ROUGHNESS, SPECULAR2, ROUGHNESS2],
+    model: |_| Ok(Coated),
+}

@@ -14,31 +14,15 @@
 //! n = 10; with the height adapter, `height(ggx)` has n = 8 as in the paper.
 //! Usage: `photomat render --maps DIR --brdf ggx --light 0.1,-0.2 --out img.png`.
 
-use std::sync::Arc;
-
 use candle_core::Tensor;
 use photomat_core::lobes::{ggx_specular, lambert};
-use photomat_core::{
-    Brdf, BrdfArgs, BrdfRegistration, DifferentiableBrdf, MaterialMaps, ParamSpec, Result,
-    ShadingGeometry, register_brdf,
-};
-
-use crate::common::{DIFFUSE, NORMAL, ROUGHNESS, SPECULAR};
-
-const PARAMS: &[ParamSpec] = &[DIFFUSE, SPECULAR, ROUGHNESS, NORMAL];
+use photomat_core::param::common::{DIFFUSE, NORMAL, ROUGHNESS, SPECULAR};
+use photomat_core::{MaterialMaps, Reflectance, Result, ShadingGeometry, register_brdf};
 
 /// Lambert + GGX.
 pub struct Ggx;
 
-impl DifferentiableBrdf for Ggx {
-    fn name(&self) -> String {
-        "ggx".into()
-    }
-
-    fn params(&self) -> &[ParamSpec] {
-        PARAMS
-    }
-
+impl Reflectance for Ggx {
     fn eval(&self, wi: &Tensor, wo: &Tensor, maps: &MaterialMaps) -> Result<Tensor> {
         let geometry = ShadingGeometry::new(wi, wo, maps.get("normal")?)?;
         let diffuse = lambert(&geometry, maps.get("diffuse")?)?;
@@ -47,16 +31,9 @@ impl DifferentiableBrdf for Ggx {
     }
 }
 
-fn construct(_: &BrdfArgs) -> Result<Brdf> {
-    Ok(Arc::new(Ggx))
-}
-
-register_brdf!(BrdfRegistration {
+register_brdf! {
     name: "ggx",
     summary: "Lambert + GGX specular, Smith G, Schlick F0 (Mitsuba diffuse + principled metallic)",
-    params: PARAMS,
-    replaces: &[],
-    takes_nested: false,
-    args: &[],
-    construct,
-});
+    params: &[DIFFUSE, SPECULAR, ROUGHNESS, NORMAL],
+    model: |_| Ok(Ggx),
+}

@@ -1,6 +1,7 @@
 //! `height`: adapter that derives a nested model's `normal` map from a 1-channel height map.
 //!
-//! Model: Mitsuba 3's `bumpmap`. On the unit material square (DESIGN §2, side 1, +y up) a map
+//! Model: Mitsuba 3's `bumpmap`. On the unit material square (`docs/conventions.md`: side 1,
+//! +y up) a map
 //! value h ∈ [0, 1] stands for the surface height `scale·h` in world units, and
 //! `normal = normalize(−scale·∂h/∂x, −scale·∂h/∂y, 1)` with central differences over one texel
 //! on each side, wrapping around the edges (so a tileable height map gives a tileable normal
@@ -18,13 +19,10 @@
 //! construction argument, not a map, and is never differentiated. With the nested `ggx`:
 //! n = 8 (diffuse 3, specular 3, roughness 1, height 1), the paper's configuration.
 
-use std::sync::Arc;
-
 use candle_core::Tensor;
 use photomat_core::vecops::normalize3;
 use photomat_core::{
-    AdaptedBrdf, ArgSpec, Brdf, BrdfArgs, BrdfRegistration, ColorSpace, Encoding, MapAdapter,
-    MaterialMaps, ParamSpec, Result, register_brdf,
+    ArgSpec, ColorSpace, Encoding, MapAdapter, MaterialMaps, ParamSpec, Result, register_brdf,
 };
 
 const HEIGHT: ParamSpec = ParamSpec {
@@ -37,8 +35,6 @@ const HEIGHT: ParamSpec = ParamSpec {
     differentiable: true,
     doc: "surface height as a fraction of `scale` (world units = scale·h)",
 };
-
-const ADDS: &[ParamSpec] = &[HEIGHT];
 
 /// Height → normal conversion with a fixed relief scale.
 pub struct HeightToNormal {
@@ -74,29 +70,20 @@ impl MapAdapter for HeightToNormal {
     }
 }
 
-fn construct(args: &BrdfArgs) -> Result<Brdf> {
-    let adapter = HeightToNormal {
-        scale: args.value("scale")?,
-    };
-    Ok(Arc::new(AdaptedBrdf::new(
-        args,
-        ADDS,
-        &["normal"],
-        adapter,
-    )?))
-}
-
-register_brdf!(BrdfRegistration {
+register_brdf! {
     name: "height",
     summary: "adapter: nested model's normal map from a height map (Mitsuba 'bumpmap')",
-    params: ADDS,
+    adds: &[HEIGHT],
     replaces: &["normal"],
-    takes_nested: true,
     args: &[ArgSpec {
         name: "scale",
         default: 0.02,
         range: (0.0, 1.0),
         doc: "world-space height of h = 1 (the plane side is 1)",
     }],
-    construct,
-});
+    adapter: |args| {
+        Ok(HeightToNormal {
+            scale: args.value("scale")?,
+        })
+    },
+}

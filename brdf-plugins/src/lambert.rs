@@ -10,47 +10,24 @@
 //!
 //! n = 6. Usage: `photomat render --maps DIR --brdf lambert --light 0,0 --out img.png`.
 
-use std::sync::Arc;
-
 use candle_core::Tensor;
 use photomat_core::lobes::lambert;
-use photomat_core::{
-    Brdf, BrdfArgs, BrdfRegistration, DifferentiableBrdf, MaterialMaps, ParamSpec, Result,
-    ShadingGeometry, register_brdf,
-};
-
-use crate::common::{DIFFUSE, NORMAL};
-
-const PARAMS: &[ParamSpec] = &[DIFFUSE, NORMAL];
+use photomat_core::param::common::{DIFFUSE, NORMAL};
+use photomat_core::{MaterialMaps, Reflectance, Result, ShadingGeometry, register_brdf};
 
 /// The Lambert model.
 pub struct Lambert;
 
-impl DifferentiableBrdf for Lambert {
-    fn name(&self) -> String {
-        "lambert".into()
-    }
-
-    fn params(&self) -> &[ParamSpec] {
-        PARAMS
-    }
-
+impl Reflectance for Lambert {
     fn eval(&self, wi: &Tensor, wo: &Tensor, maps: &MaterialMaps) -> Result<Tensor> {
         let geometry = ShadingGeometry::new(wi, wo, maps.get("normal")?)?;
         lambert(&geometry, maps.get("diffuse")?)
     }
 }
 
-fn construct(_: &BrdfArgs) -> Result<Brdf> {
-    Ok(Arc::new(Lambert))
-}
-
-register_brdf!(BrdfRegistration {
+register_brdf! {
     name: "lambert",
     summary: "ideal diffuse reflector ρ/π (Mitsuba 'diffuse')",
-    params: PARAMS,
-    replaces: &[],
-    takes_nested: false,
-    args: &[],
-    construct,
-});
+    params: &[DIFFUSE, NORMAL],
+    model: |_| Ok(Lambert),
+}

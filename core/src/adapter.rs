@@ -1,10 +1,10 @@
 //! Composable adapters: a model that rewrites its maps and hands them to a nested model.
 //!
-//! Mitsuba's `bumpmap`/`normalmap` are the model (`shared/STYLE.md`): an adapter is a plugin
-//! too, registered with `takes_nested`, built around the nested model named in the
-//! specification (`height(ggx)`), and adapters nest (`a(b(ggx))`). The adapter declares which
-//! of the nested model's maps it replaces and which it adds; [`AdaptedBrdf`] does the
-//! bookkeeping and implements [`DifferentiableBrdf`] by evaluating the nested model on the
+//! Mitsuba 3's `bumpmap`/`normalmap` are the model: an adapter is a plugin too, registered
+//! with [`register_brdf!`](crate::register_brdf)'s `adapter:` form, built around the nested
+//! model named in the specification (`height(ggx)`), and adapters nest (`a(b(ggx))`). The
+//! registration declares which of the nested model's maps the adapter replaces and which it
+//! adds; [`AdaptedBrdf`] does the bookkeeping and implements [`DifferentiableBrdf`] by evaluating the nested model on the
 //! adapted maps, so gradients flow through the adaptation by candle autodiff.
 
 use candle_core::Tensor;
@@ -31,10 +31,11 @@ pub struct AdaptedBrdf<A: MapAdapter> {
 }
 
 impl<A: MapAdapter> AdaptedBrdf<A> {
-    /// Wrap `args.nested()`: its maps named in `replaces` give way to `adds`, inserted where
-    /// the first replaced map stood (so the channel order stays natural: diffuse, specular,
-    /// roughness, height).
-    pub fn new(args: &BrdfArgs, adds: &[ParamSpec], replaces: &[&str], adapter: A) -> Result<Self> {
+    /// Wrap `args.nested()`: its maps named in the registration's `replaces` give way to the
+    /// registration's `params` (the maps the adapter adds), inserted where the first replaced
+    /// map stood (so the channel order stays natural: diffuse, specular, roughness, height).
+    pub fn new(args: &BrdfArgs, adapter: A) -> Result<Self> {
+        let (adds, replaces) = (args.registration().params, args.registration().replaces);
         let nested = args.nested()?;
         let inner = nested.params();
         for name in replaces {
@@ -72,9 +73,9 @@ impl<A: MapAdapter> AdaptedBrdf<A> {
         })
     }
 
-    /// The wrapped model.
-    pub fn nested(&self) -> &Brdf {
-        &self.nested
+    /// The map rewrite.
+    pub fn adapter(&self) -> &A {
+        &self.adapter
     }
 }
 
@@ -93,5 +94,9 @@ impl<A: MapAdapter> DifferentiableBrdf for AdaptedBrdf<A> {
 
     fn shading_maps(&self, maps: &MaterialMaps) -> Result<MaterialMaps> {
         self.nested.shading_maps(&self.adapter.adapt(maps)?)
+    }
+
+    fn nested(&self) -> Option<&Brdf> {
+        Some(&self.nested)
     }
 }

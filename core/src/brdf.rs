@@ -1,6 +1,13 @@
 //! The `DifferentiableBrdf` trait every model and adapter implements.
 //!
-//! Conventions (DESIGN §3, Mitsuba 3's `BSDF::eval`): directions are per-texel world-space
+//! Plugins do not implement it by hand: [`register_brdf!`](crate::register_brdf) wraps a
+//! model's [`Reflectance`](crate::model::Reflectance) in a [`ModelBrdf`](crate::model::ModelBrdf)
+//! and an adapter's [`MapAdapter`](crate::adapter::MapAdapter) in an
+//! [`AdaptedBrdf`](crate::adapter::AdaptedBrdf), which carry the name and parameter maps of
+//! the registration. Implementing it directly stays possible for models that are not
+//! registered (test doubles, wrappers).
+//!
+//! Conventions (`docs/conventions.md`, Mitsuba 3's `BSDF::eval`): directions are per-texel world-space
 //! unit vectors pointing away from the surface; `eval` returns `f(wi, wo)·cos θ_o` where θ_o
 //! is measured from the model's shading normal; a pair with either direction below the
 //! shading horizon gives exactly 0 (never NaN, with finite gradients).
@@ -35,6 +42,12 @@ pub trait DifferentiableBrdf: Send + Sync {
         Ok(maps.clone())
     }
 
+    /// The model an adapter wraps (`ggx` in `height(ggx)`); `None` for models.
+    /// [`innermost`](Self::innermost) follows this chain to the shading model.
+    fn nested(&self) -> Option<&Brdf> {
+        None
+    }
+
     /// Total channel count `n` of the parameter maps (the estimator's output width).
     fn channels(&self) -> usize {
         total_channels(self.params())
@@ -65,3 +78,15 @@ pub trait DifferentiableBrdf: Send + Sync {
 
 /// Shared handle to a model, as returned by the registry.
 pub type Brdf = Arc<dyn DifferentiableBrdf>;
+
+impl dyn DifferentiableBrdf {
+    /// The innermost model of an adapter chain, the one that shades what
+    /// [`DifferentiableBrdf::shading_maps`] returns: `ggx` for `height(ggx, scale=0.02)`,
+    /// the model itself for a model.
+    pub fn innermost(self: &Arc<Self>) -> Brdf {
+        match self.nested() {
+            Some(inner) => inner.innermost(),
+            None => Arc::clone(self),
+        }
+    }
+}

@@ -3,11 +3,12 @@
 //! The conventions every photomat crate shares (`docs/conventions.md`): the
 //! [`DifferentiableBrdf`] trait and its parameter specs, the plugin [`registry`], the shared
 //! [`microfacet`] maths, the collocated-[`flash`] plane geometry, the differentiable
-//! [`render`]er, the material-map folder format ([`map_files`]) and the seeded random
-//! generator every crate draws from ([`rng`]).
+//! [`render`]er, the material-map folder format ([`map_files`]), the seeded random
+//! generator every crate draws from ([`rng`]) and the conformance kit every plugin's tests run
+//! ([`testing`]).
 //!
-//! Models live in `photomat-brdfs` (and in users' own crates); they register themselves with
-//! [`register_brdf!`] and are built by name with [`lookup`]:
+//! Models live in `photomat-brdfs` (and in users' own crates); each declares itself once
+//! with [`register_brdf!`] and is built by name with [`lookup`]:
 //!
 //! ```ignore
 //! use photomat_brdfs as _; // link the built-in plugins
@@ -26,6 +27,7 @@ pub mod lobes;
 pub mod map_files;
 pub mod maps;
 pub mod microfacet;
+pub mod model;
 pub mod param;
 pub mod paths;
 pub mod plugin_spec;
@@ -35,6 +37,7 @@ pub mod render;
 pub mod rng;
 pub mod shading;
 pub mod sheet;
+pub mod testing;
 pub mod vecops;
 
 pub use adapter::{AdaptedBrdf, MapAdapter};
@@ -43,8 +46,12 @@ pub use error::{Error, Result};
 pub use flash::{FlashGeometry, Highlight};
 pub use lights::LightSet;
 pub use maps::MaterialMaps;
+pub use model::{ModelBrdf, Reflectance};
 pub use param::{ColorSpace, Encoding, ParamSpec};
-pub use registry::{ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations};
+pub use registry::{
+    ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations,
+    registrations_from,
+};
 pub use render::{encode_display, render, render_radiance, render_radiance_with, render_with};
 pub use rng::SplitMix64;
 pub use shading::ShadingGeometry;

@@ -3,7 +3,10 @@
 //! A plugin declares its maps as a list of [`ParamSpec`]s (Mitsuba's parameter table, made
 //! machine readable). The estimator's output channel count is the sum of their channels; the
 //! [`Encoding`] turns that unconstrained network output into physical values; the
-//! [`ColorSpace`] says how the map is written to 8/16-bit files.
+//! [`ColorSpace`] says how the map is written to 8/16-bit files. The maps several models share
+//! (`diffuse`, `specular`, `roughness`, `normal`) have one definition, in [`common`].
+
+pub mod common;
 
 use candle_core::Tensor;
 
@@ -14,7 +17,7 @@ use crate::{Error, Result};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ColorSpace {
-    /// Albedo-like values in [0, 1], written as `x^(1/2.2)` (the display encoding of DESIGN §2).
+    /// Albedo-like values in [0, 1], written as `x^(1/2.2)` (the display encoding of `docs/conventions.md`).
     Gamma22,
     /// Scalar values in [0, 1] written as they are (roughness, height).
     Linear,

@@ -1,9 +1,13 @@
-//! The plugin registry: models register a const [`BrdfRegistration`] with
-//! [`register_brdf!`](crate::register_brdf) and are built **by name** with [`lookup`].
+//! The plugin registry: each plugin declares itself once with
+//! [`register_brdf!`](crate::register_brdf), which submits a const [`BrdfRegistration`], and
+//! models are built **by name** with [`lookup`].
 //!
-//! Follows inventory's real users (typetag, yara-x; `shared/STYLE.md`): records are const,
-//! the macro expands through `$crate` so plugin crates never name `inventory`, listings are
-//! sorted, duplicate names are an error, and an unknown name lists the known ones.
+//! Follows inventory's real users (typetag, yara-x): records are const, the macro expands
+//! through `$crate` so plugin crates never name `inventory`, listings are sorted, duplicate
+//! names are an error, and an unknown name lists the known ones. Each record also notes the
+//! source file and module that registered it, so tests can check Mitsuba's layout rule
+//! "file stem = registered name" and a plugin crate can list its own models
+//! ([`registrations_from`]).
 //!
 //! Linking pitfall: a crate that depends on a plugin crate but never names it in code sees
 //! none of its plugins. Binaries and tests that use plugins write `use photomat_brdfs as _;`.
@@ -25,7 +29,7 @@ pub struct ArgSpec {
     pub doc: &'static str,
 }
 
-/// The const record a plugin submits.
+/// The const record a plugin submits (written by [`register_brdf!`](crate::register_brdf)).
 pub struct BrdfRegistration {
     /// Registered name: the file stem of the plugin's source file.
     pub name: &'static str,
@@ -41,16 +45,41 @@ pub struct BrdfRegistration {
     pub args: &'static [ArgSpec],
     /// Builds an instance from validated arguments.
     pub construct: fn(&BrdfArgs) -> Result<Brdf>,
+    /// `file!()` of the registration: the plugin's source file.
+    pub file: &'static str,
+    /// `module_path!()` of the registration; its first segment is the registering crate.
+    pub module: &'static str,
+}
+
+impl BrdfRegistration {
+    /// Stem of [`Self::file`] (`ggx` for `brdf-plugins/src/ggx.rs`), which must equal the
+    /// registered name; `None` if the path has no UTF-8 stem.
+    pub fn file_stem(&self) -> Option<&'static str> {
+        std::path::Path::new(self.file)
+            .file_stem()
+            .and_then(|s| s.to_str())
+    }
+
+    /// The crate that registered the plugin (`photomat_brdfs` for the built-ins).
+    pub fn crate_name(&self) -> &'static str {
+        self.module.split("::").next().unwrap_or(self.module)
+    }
 }
 
 /// Validated construction arguments handed to a plugin's constructor.
 pub struct BrdfArgs {
+    registration: &'static BrdfRegistration,
     canonical: String,
     nested: Option<Brdf>,
     values: BTreeMap<&'static str, f64>,
 }
 
 impl BrdfArgs {
+    /// The registration of the plugin being built (its maps, replaced maps, arguments).
+    pub fn registration(&self) -> &'static BrdfRegistration {
+        self.registration
+    }
+
     /// Canonical specification of the instance being built (what its `name()` returns).
     pub fn canonical_name(&self) -> &str {
         &self.canonical
@@ -75,16 +104,105 @@ impl BrdfArgs {
 
 inventory::collect!(BrdfRegistration);
 
-/// Register a model or adapter. Expands through `$crate`, so plugin crates depend on
-/// `photomat-core` only:
+/// Declare a model or an adapter, once: its name, summary, maps and arguments go into the
+/// registry record, and the registry builds instances that carry them, so a plugin writes
+/// only its maths. Expands through `$crate`, so plugin crates depend on `photomat-core` only.
+///
+/// A model gives its parameter maps and a constructor of its [`Reflectance`]; the instance is
+/// a [`ModelBrdf`] named by its canonical specification:
 ///
 /// ```ignore
-/// photomat_core::register_brdf!(BrdfRegistration { name: "lambert", /* … */ });
+/// use photomat_core::param::common::{DIFFUSE, NORMAL};
+/// photomat_core::register_brdf! {
+///     name: "lambert",            // = the file stem: src/lambert.rs
+///     summary: "ideal diffuse reflector ρ/π",
+///     params: &[DIFFUSE, NORMAL],
+///     model: |_args| Ok(Lambert), // Lambert: Reflectance
+/// }
 /// ```
+///
+/// An adapter gives the maps it adds and the nested model's maps it replaces, and a
+/// constructor of its [`MapAdapter`]; the instance is an [`AdaptedBrdf`]:
+///
+/// ```ignore
+/// photomat_core::register_brdf! {
+///     name: "height",
+///     summary: "nested model's normal map from a height map",
+///     adds: &[HEIGHT],
+///     replaces: &["normal"],
+///     args: &[ArgSpec { name: "scale", default: 0.02, range: (0.0, 1.0), doc: "…" }],
+///     adapter: |args| Ok(HeightToNormal { scale: args.value("scale")? }),
+/// }
+/// ```
+///
+/// `args` (scalar construction arguments, read with [`BrdfArgs::value`]) is optional in both.
+///
+/// [`Reflectance`]: crate::model::Reflectance
+/// [`ModelBrdf`]: crate::model::ModelBrdf
+/// [`MapAdapter`]: crate::adapter::MapAdapter
+/// [`AdaptedBrdf`]: crate::adapter::AdaptedBrdf
 #[macro_export]
 macro_rules! register_brdf {
-    ($registration:expr $(,)?) => {
-        $crate::__private::inventory::submit! { $registration }
+    (@args) => { &[] };
+    (@args $args:expr) => { $args };
+    (@submit $name:expr, $summary:expr, $params:expr, $replaces:expr, $nested:expr,
+     $args:expr, $construct:ident) => {
+        $crate::__private::inventory::submit! {
+            $crate::registry::BrdfRegistration {
+                name: $name,
+                summary: $summary,
+                params: $params,
+                replaces: $replaces,
+                takes_nested: $nested,
+                args: $args,
+                construct: $construct,
+                file: ::core::file!(),
+                module: ::core::module_path!(),
+            }
+        }
+    };
+    (
+        name: $name:expr,
+        summary: $summary:expr,
+        params: $params:expr,
+        $(args: $args:expr,)?
+        model: $model:expr $(,)?
+    ) => {
+        const _: () = {
+            fn construct(
+                args: &$crate::registry::BrdfArgs,
+            ) -> $crate::Result<$crate::brdf::Brdf> {
+                let reflectance: fn(&$crate::registry::BrdfArgs) -> $crate::Result<_> = $model;
+                Ok(::std::sync::Arc::new($crate::model::ModelBrdf::new(
+                    args,
+                    reflectance(args)?,
+                )))
+            }
+            $crate::register_brdf!(@submit $name, $summary, $params, &[], false,
+                $crate::register_brdf!(@args $($args)?), construct);
+        };
+    };
+    (
+        name: $name:expr,
+        summary: $summary:expr,
+        adds: $adds:expr,
+        replaces: $replaces:expr,
+        $(args: $args:expr,)?
+        adapter: $adapter:expr $(,)?
+    ) => {
+        const _: () = {
+            fn construct(
+                args: &$crate::registry::BrdfArgs,
+            ) -> $crate::Result<$crate::brdf::Brdf> {
+                let adapter: fn(&$crate::registry::BrdfArgs) -> $crate::Result<_> = $adapter;
+                Ok(::std::sync::Arc::new($crate::adapter::AdaptedBrdf::new(
+                    args,
+                    adapter(args)?,
+                )?))
+            }
+            $crate::register_brdf!(@submit $name, $summary, $adds, $replaces, true,
+                $crate::register_brdf!(@args $($args)?), construct);
+        };
     };
 }
 
@@ -96,6 +214,15 @@ pub fn registrations() -> Result<Vec<&'static BrdfRegistration>> {
 /// Sorted registered names (the registry guard tests compare this list).
 pub fn registered_names() -> Result<Vec<&'static str>> {
     Ok(registrations()?.into_iter().map(|r| r.name).collect())
+}
+
+/// The registrations made by crate `crate_name` (as `module_path!()` spells it, e.g.
+/// `photomat_brdfs`), sorted by name: how a plugin crate lists its own models.
+pub fn registrations_from(crate_name: &str) -> Result<Vec<&'static BrdfRegistration>> {
+    Ok(registrations()?
+        .into_iter()
+        .filter(|r| r.crate_name() == crate_name)
+        .collect())
 }
 
 /// Sort by name and reject duplicates.
@@ -175,6 +302,7 @@ fn build(spec: &PluginSpec, full_text: &str) -> Result<Brdf> {
     }
     .to_string();
     let args = BrdfArgs {
+        registration: reg,
         canonical,
         nested,
         values,

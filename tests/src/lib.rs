@@ -8,65 +8,68 @@
 //! R×R "material" — directions (1, 3, R, R), maps (1, C, R, R) — so that every model, adapters
 //! included, is exercised through exactly the tensors the renderer uses.
 
-use candle_core::{DType, Device, Tensor, Var};
-use photomat_core::{Brdf, Encoding, MaterialMaps, lookup};
+use candle_core::{DType, Tensor, Var};
+use photomat_core::testing;
+use photomat_core::{Brdf, MaterialMaps, lookup};
 use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
 
 pub use photomat_brdfs as brdfs;
 
 pub mod cli_fixtures;
 
-/// The models linked into plain test binaries, sorted (registry guard).
-pub const EXPECTED_BUILTINS: &[&str] = &["coated", "ggx", "height", "lambert"];
+/// The models linked into plain test binaries, sorted (registry guard): the stems of the
+/// plugin files `brdf-plugins/src/*.rs` other than the crate root, read from the sources so
+/// that the list does not depend on what the linker kept.
+pub fn expected_builtins() -> Vec<String> {
+    let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../brdf-plugins/src");
+    let mut stems: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|x| x == "rs"))
+        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
+        .filter(|stem| stem != "lib")
+        .collect();
+    stems.sort();
+    stems
+}
 
-/// Every model configuration the property tests run on.
-pub const MODELS_UNDER_TEST: &[&str] = &["lambert", "ggx", "coated", "height(ggx)"];
+/// Every model configuration the property tests run on: each built-in model and each
+/// built-in adapter around the first model it accepts (`photomat_brdfs::builtin_configurations`).
+pub fn models_under_test() -> Vec<String> {
+    brdfs::builtin_configurations().unwrap_or_else(|e| panic!("{e}"))
+}
 
 /// A model by specification; panics with the registry's message (tests only).
 pub fn model(spec: &str) -> Brdf {
     lookup(spec).unwrap_or_else(|e| panic!("{e}"))
 }
 
-/// Seeded generator for reproducible cases.
+/// Panic with the library's message (tests only).
+fn ok<T>(r: photomat_core::Result<T>) -> T {
+    r.unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Seeded generator for reproducible cases ([`testing::rng`]).
 pub fn rng(seed: u64) -> StdRng {
-    StdRng::seed_from_u64(seed)
+    testing::rng(seed)
 }
 
-/// A unit direction with `z ≥ min_cos`, uniform in solid angle over that cap.
+/// [`testing::random_direction`].
 pub fn random_direction(rng: &mut StdRng, min_cos: f64) -> [f64; 3] {
-    let z: f64 = rng.random_range(min_cos..1.0);
-    let phi: f64 = rng.random_range(0.0..std::f64::consts::TAU);
-    let s = (1.0 - z * z).max(0.0).sqrt();
-    [s * phi.cos(), s * phi.sin(), z]
+    testing::random_direction(rng, min_cos)
 }
 
-/// (1, 3, R, R) tensor of per-texel directions, row-major over the R×R grid.
+/// [`testing::directions`], panicking.
 pub fn directions(dirs: &[[f64; 3]], size: usize, dtype: DType) -> Tensor {
-    assert_eq!(dirs.len(), size * size);
-    let mut data = vec![0f64; 3 * size * size];
-    for (t, d) in dirs.iter().enumerate() {
-        for c in 0..3 {
-            data[c * size * size + t] = d[c];
-        }
-    }
-    Tensor::from_vec(data, (1, 3, size, size), &Device::Cpu)
-        .and_then(|t| t.to_dtype(dtype))
-        .unwrap()
+    ok(testing::directions(dirs, size, dtype))
 }
 
-/// `size²` random directions with `z ≥ min_cos`, as a (1, 3, R, R) tensor.
+/// [`testing::random_directions`], panicking.
 pub fn random_directions(rng: &mut StdRng, size: usize, min_cos: f64, dtype: DType) -> Tensor {
-    let dirs: Vec<_> = (0..size * size)
-        .map(|_| random_direction(rng, min_cos))
-        .collect();
-    directions(&dirs, size, dtype)
+    ok(testing::random_directions(rng, size, min_cos, dtype))
 }
 
-/// Random maps for `brdf` of size R×R: every channel uniform over its range, except
-/// roughness-like linear scalars drawn from `[rough_min, 1]` and normals tilted by at most
-/// ≈ 27° (x, y ∈ [−½, ½], z = 1) so that cases with directions of `z ≥ ½` stay above the
-/// shading horizon. Heights use the full [0, 1] range.
+/// [`testing::random_maps`], panicking.
 pub fn random_maps(
     brdf: &Brdf,
     rng: &mut StdRng,
@@ -74,78 +77,25 @@ pub fn random_maps(
     rough_min: f64,
     dtype: DType,
 ) -> MaterialMaps {
-    let mut maps = MaterialMaps::new();
-    for spec in brdf.params() {
-        let n = spec.channels * size * size;
-        let data: Vec<f64> = match spec.encoding {
-            Encoding::UnitNormal => (0..n)
-                .map(|i| {
-                    if i / (size * size) == 2 {
-                        1.0
-                    } else {
-                        rng.random_range(-0.5..0.5)
-                    }
-                })
-                .collect(),
-            _ if spec.name.starts_with("roughness") => {
-                (0..n).map(|_| rng.random_range(rough_min..=1.0)).collect()
-            }
-            _ => {
-                let (lo, hi) = (spec.range.0 as f64, spec.range.1 as f64);
-                (0..n).map(|_| rng.random_range(lo..=hi)).collect()
-            }
-        };
-        let t = Tensor::from_vec(data, (1, spec.channels, size, size), &Device::Cpu)
-            .and_then(|t| t.to_dtype(dtype))
-            .unwrap();
-        maps.insert(spec.name, t);
-    }
-    maps
+    ok(testing::random_maps(brdf, rng, size, rough_min, dtype))
 }
 
-/// Flattened values of any tensor as f64.
+/// [`testing::values`], panicking.
 pub fn values(t: &Tensor) -> Vec<f64> {
-    t.to_dtype(DType::F64)
-        .and_then(|t| t.flatten_all())
-        .and_then(|t| t.to_vec1::<f64>())
-        .unwrap()
+    ok(testing::values(t))
 }
 
-/// Wrap every map in a [`Var`] so that gradients can be taken w.r.t. it.
+/// [`testing::as_vars`], panicking.
 pub fn as_vars(maps: &MaterialMaps) -> (MaterialMaps, Vec<(String, Var)>) {
-    let mut out = MaterialMaps::new();
-    let mut vars = Vec::new();
-    for (name, t) in maps.iter() {
-        let var = Var::from_tensor(t).unwrap();
-        out.insert(name, var.as_tensor().clone());
-        vars.push((name.to_string(), var));
-    }
-    (out, vars)
+    ok(testing::as_vars(maps))
 }
 
-/// Gradient of scalar `loss` w.r.t. every var, as flattened f64 vectors, by name.
+/// [`testing::gradients`], panicking.
 pub fn gradients(loss: &Tensor, vars: &[(String, Var)]) -> Vec<(String, Vec<f64>)> {
-    let grads = loss.backward().unwrap();
-    vars.iter()
-        .map(|(name, var)| {
-            let g = grads
-                .get(var.as_tensor())
-                .map(values)
-                .unwrap_or_else(|| vec![0.0; var.as_tensor().elem_count()]);
-            (name.clone(), g)
-        })
-        .collect()
+    ok(testing::gradients(loss, vars))
 }
 
-/// Copy of `maps` with element `index` (flattened) of map `name` shifted by `delta`.
+/// [`testing::perturbed`], panicking.
 pub fn perturbed(maps: &MaterialMaps, name: &str, index: usize, delta: f64) -> MaterialMaps {
-    let mut out = maps.clone();
-    let t = maps.get(name).unwrap();
-    let mut v = values(t);
-    v[index] += delta;
-    let shifted = Tensor::from_vec(v, t.dims(), t.device())
-        .and_then(|s| s.to_dtype(t.dtype()))
-        .unwrap();
-    out.insert(name, shifted);
-    out
+    ok(testing::perturbed(maps, name, index, delta))
 }

@@ -13,8 +13,9 @@ use photomat_core::map_files::{
     FORMAT_TAG, FORMAT_VERSION, MANIFEST_FILE, PngBits, RANGE_TOLERANCE, SaveOptions, load_maps,
     save_maps,
 };
-use photomat_core::{Brdf, ColorSpace, Error, MaterialMaps, registered_names};
-use photomat_tests::{EXPECTED_BUILTINS, model, random_maps, rng, values};
+use photomat_core::testing::{check_exr_round_trip, check_png_round_trip};
+use photomat_core::{Brdf, Error, MaterialMaps, registered_names};
+use photomat_tests::{expected_builtins, model, random_maps, rng, values};
 
 const SIZE: usize = 16;
 
@@ -79,11 +80,12 @@ fn max_abs_diff(a: &Tensor, b: &Tensor) -> f64 {
 
 #[test]
 fn map_files_registry_has_the_builtins() {
-    assert_eq!(registered_names().unwrap(), EXPECTED_BUILTINS);
+    assert_eq!(registered_names().unwrap(), expected_builtins());
 }
 
 #[test]
 fn map_files_exr_round_trip_is_exact() {
+    // The conformance kit's check: model name, map names, shapes, dtype and values restored.
     for spec in [
         "lambert",
         "ggx",
@@ -91,17 +93,7 @@ fn map_files_exr_round_trip_is_exact() {
         "height(ggx)",
         "height(ggx, scale=0.05)",
     ] {
-        let (dir, brdf, maps) = saved(spec, &SaveOptions::default());
-        let loaded = load_maps(dir.path(), None).unwrap();
-        assert_eq!(loaded.brdf.name(), brdf.name());
-        assert_eq!(loaded.maps.names(), maps.names());
-        for (name, original) in maps.iter() {
-            let back = loaded.maps.get(name).unwrap();
-            assert_eq!(back.dims(), &[1, original.dim(1).unwrap(), SIZE, SIZE]);
-            assert_eq!(back.dtype(), DType::F32);
-            assert!(back.device().is_cpu());
-            assert_eq!(values(back), values(original), "{spec}: map '{name}'");
-        }
+        check_exr_round_trip(spec).unwrap();
     }
 }
 
@@ -122,28 +114,10 @@ fn map_files_f64_maps_round_trip_as_their_f32_values() {
 
 #[test]
 fn map_files_png_round_trip_is_within_quantisation() {
+    // The conformance kit's check: half a quantisation step times the colour space's slope.
     for bits in [PngBits::Sixteen, PngBits::Eight] {
         for spec in ["ggx", "coated", "height(ggx)"] {
-            let (dir, brdf, maps) = saved(spec, &SaveOptions { png_bits: bits });
-            drop_exr_entries(dir.path());
-            let loaded = load_maps(dir.path(), None).unwrap();
-            // Half a quantisation step in stored units, plus f32 arithmetic.
-            let half_step = 0.5 / bits.max_value() as f64;
-            for p in brdf.params() {
-                // Physical error per stored error: 1 (linear); ≤ 2.2 (d s^2.2/ds on [0, 1]);
-                // normals: 2 per component, ×√3 over the vector, ×2 after renormalising.
-                let gain = match p.color_space {
-                    ColorSpace::Linear => 1.0,
-                    ColorSpace::Gamma22 => 2.2,
-                    ColorSpace::UnitVector => 4.0 * 3f64.sqrt(),
-                };
-                let err = max_abs_diff(loaded.maps.get(p.name).unwrap(), maps.get(p.name).unwrap());
-                assert!(
-                    err <= gain * half_step + 1e-6,
-                    "{spec}, {bits:?}, map '{}': error {err}",
-                    p.name
-                );
-            }
+            check_png_round_trip(spec, bits).unwrap();
         }
     }
 }
@@ -321,7 +295,7 @@ fn map_files_unknown_brdf_lists_known_names() {
     let (path, reason) = load_error(dir.path());
     assert_eq!(path, dir.path().join(MANIFEST_FILE));
     assert!(reason.contains("'phong'"), "{reason}");
-    assert!(reason.contains("coated, ggx, height, lambert"), "{reason}");
+    assert!(reason.contains(&expected_builtins().join(", ")), "{reason}");
 }
 
 #[test]

@@ -1,15 +1,46 @@
 //! Registry guard and lookup errors: the built-in plugins are linked into test binaries
-//! (DESIGN §3's linking pitfall), names are unique and sorted, and bad names or
-//! specifications fail with messages a user can act on.
+//! (the linking pitfall of `photomat_core::registry`), names are unique, sorted and equal to
+//! their files' stems, and bad names or specifications fail with messages a user can act on.
 
 use photomat_core::registry::sorted_unique;
-use photomat_core::{BrdfArgs, BrdfRegistration, Error, Result, lookup, registered_names};
-use photomat_tests::{EXPECTED_BUILTINS, model};
+use photomat_core::{
+    BrdfArgs, BrdfRegistration, Error, Result, lookup, registered_names, registrations,
+};
+use photomat_tests::{expected_builtins, model};
 
 #[test]
 fn registry_lists_exactly_the_builtins_sorted() {
-    assert_eq!(registered_names().unwrap(), EXPECTED_BUILTINS);
-    assert_eq!(photomat_tests::brdfs::BUILTIN_NAMES, EXPECTED_BUILTINS);
+    // One plugin per file of brdf-plugins/src: the guard adapts to a new file by itself.
+    let expected = expected_builtins();
+    assert!(expected.contains(&"ggx".to_string()), "{expected:?}");
+    assert_eq!(registered_names().unwrap(), expected);
+    assert_eq!(photomat_tests::brdfs::builtin_names().unwrap(), expected);
+}
+
+#[test]
+fn registry_file_stem_equals_registered_name() {
+    for r in registrations().unwrap() {
+        assert_eq!(
+            r.file_stem(),
+            Some(r.name),
+            "{} registered in {}",
+            r.name,
+            r.file
+        );
+    }
+}
+
+#[test]
+fn registry_innermost_is_the_shading_model() {
+    for (spec, inner) in [
+        ("ggx", "ggx"),
+        ("height(ggx)", "ggx"),
+        ("height(lambert, scale=0.5)", "lambert"),
+    ] {
+        assert_eq!(model(spec).innermost().name(), inner, "{spec}");
+    }
+    let plain = model("coated");
+    assert!(std::sync::Arc::ptr_eq(&plain.innermost(), &plain));
 }
 
 #[test]
@@ -19,13 +50,11 @@ fn registry_unknown_name_lists_known_names() {
         .expect("unknown name must fail")
         .to_string();
     assert!(err.contains("'gxx'"), "{err}");
-    assert!(err.contains("coated, ggx, height, lambert"), "{err}");
+    let known = expected_builtins().join(", ");
+    assert!(err.contains(&known), "{err}");
     // Unknown names nested inside an adapter are reported the same way.
     let err = lookup("height(blinn)").err().unwrap().to_string();
-    assert!(
-        err.contains("'blinn'") && err.contains("coated, ggx, height, lambert"),
-        "{err}"
-    );
+    assert!(err.contains("'blinn'") && err.contains(&known), "{err}");
 }
 
 fn never_built(_: &BrdfArgs) -> Result<photomat_core::Brdf> {
@@ -41,6 +70,8 @@ const fn registration(name: &'static str) -> BrdfRegistration {
         takes_nested: false,
         args: &[],
         construct: never_built,
+        file: file!(),
+        module: module_path!(),
     }
 }
 

@@ -173,7 +173,7 @@ fn height_adapter_normals_of_a_periodic_field_are_periodic() {
 
 #[test]
 fn decode_gives_maps_that_validate_for_every_model() {
-    for spec in photomat_tests::MODELS_UNDER_TEST {
+    for spec in &photomat_tests::models_under_test() {
         let brdf = model(spec);
         let raw =
             (Tensor::randn(0f32, 3.0, (2, brdf.channels(), 8, 8), &Device::Cpu).unwrap()).clone();

@@ -77,8 +77,7 @@ impl Scene {
         maps.validate(&family_model.name(), family_model.params())?;
         let on_photo = lookup(&rescale_heights(&spec, PHOTO_SIDE)?.to_string())?;
         let shading_maps = on_photo.shading_maps(&maps)?;
-        let shading = lookup(&innermost(&spec).to_string())?;
-        Self::new(shading, shading_maps)
+        Self::new(on_photo.innermost(), shading_maps)
     }
 
     /// The shading model (`ggx`, `coated`, `lambert`, …).
@@ -175,14 +174,6 @@ fn rescale_heights(spec: &PluginSpec, side: f64) -> Result<PluginSpec> {
     Ok(out)
 }
 
-/// The innermost model of an adapter chain: the shading model (`height(ggx)` → `ggx`).
-fn innermost(spec: &PluginSpec) -> &PluginSpec {
-    match spec.nested.first() {
-        Some(inner) => innermost(inner),
-        None => spec,
-    }
-}
-
 /// Where the flash lands: the photo centre plus Gaussian jitter, like a hand-held phone aimed
 /// at the middle of the material.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -246,7 +237,6 @@ mod tests {
         );
         let plain = PluginSpec::parse("coated").unwrap();
         assert_eq!(rescale_heights(&plain, 2.0).unwrap(), plain);
-        assert_eq!(innermost(&spec).to_string(), "ggx");
     }
 
     #[test]

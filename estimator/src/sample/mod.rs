@@ -54,10 +54,9 @@ use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor};
 use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
-use photomat_core::plugin_spec::PluginSpec;
 use photomat_core::previews::map_previews;
 use photomat_core::sheet::{grid, resize_square};
-use photomat_core::{Brdf, FlashGeometry, LightSet, MaterialMaps, lookup, render_with};
+use photomat_core::{Brdf, FlashGeometry, LightSet, MaterialMaps, render_with};
 use photomat_generator::GanModel;
 use photomat_generator::model_files::GAN_MANIFEST_FILE;
 
@@ -212,7 +211,7 @@ impl Sampler {
             );
         }
         let brdf = self.estimator.brdf().clone();
-        let inner = innermost(&brdf)?;
+        let inner = brdf.innermost();
         let resolution = config.resolution;
         let lights = self.lights();
         let geometry = lights.geometry(resolution, DType::F32, self.gan.device())?;
@@ -459,19 +458,6 @@ impl Job<'_> {
         let neural = Tensor::cat(&neural, 0)?.affine(0.5, 0.5)?.clamp(0.0, 1.0)?;
         Ok((neural, Tensor::cat(&analytic, 0)?))
     }
-}
-
-/// The innermost analytic model of `brdf` (itself unless it is an adapter such as
-/// `height(ggx)`): the model `shading_maps` returns maps for.
-fn innermost(brdf: &Brdf) -> anyhow::Result<Brdf> {
-    let mut spec = PluginSpec::parse(&brdf.name())?;
-    if spec.nested.is_empty() {
-        return Ok(brdf.clone());
-    }
-    while let Some(first) = spec.nested.first().cloned() {
-        spec = first;
-    }
-    Ok(lookup(&spec.to_string())?)
 }
 
 /// The display-encoded render of `maps` under the centred flash, resized to `side`.

@@ -25,13 +25,13 @@
 //! Usage: `photomat-custom render --maps DIR --brdf blinn_phong --light 0.1,0.1 --out img.png`.
 
 use std::f64::consts::{LN_2, PI};
-use std::sync::Arc;
 
 use candle_core::Tensor;
 use photomat_core::lobes::lambert;
+use photomat_core::param::common::{DIFFUSE, NORMAL, SPECULAR};
 use photomat_core::{
-    Brdf, BrdfArgs, BrdfRegistration, ColorSpace, DifferentiableBrdf, Encoding, MaterialMaps,
-    ParamSpec, Result, ShadingGeometry, register_brdf,
+    ColorSpace, Encoding, MaterialMaps, ParamSpec, Reflectance, Result, ShadingGeometry,
+    register_brdf,
 };
 
 /// Smallest exponent, at glossiness 0: `2^EXPONENT_LOG2_MIN`.
@@ -39,48 +39,23 @@ pub const EXPONENT_LOG2_MIN: f64 = 1.0;
 /// log2 of the exponent's range: glossiness 1 gives `2^(EXPONENT_LOG2_MIN + EXPONENT_LOG2_SPAN)`.
 pub const EXPONENT_LOG2_SPAN: f64 = 12.0;
 
-const PARAMS: &[ParamSpec] = &[
-    ParamSpec {
-        name: "diffuse",
-        channels: 3,
-        range: (0.0, 1.0),
-        encoding: Encoding::Gamma22,
-        color_space: ColorSpace::Gamma22,
-        default: &[0.5, 0.5, 0.5],
-        differentiable: true,
-        doc: "diffuse albedo ρ_d, linear rgb",
-    },
-    ParamSpec {
-        name: "specular",
-        channels: 3,
-        range: (0.0, 1.0),
-        encoding: Encoding::Gamma22,
-        color_space: ColorSpace::Gamma22,
-        default: &[0.04, 0.04, 0.04],
-        differentiable: true,
-        doc: "specular albedo k_s (no Fresnel: the same at every angle), linear rgb",
-    },
-    ParamSpec {
-        name: "glossiness",
-        channels: 1,
-        range: (0.0, 1.0),
-        encoding: Encoding::Linear,
-        color_space: ColorSpace::Linear,
-        default: &[0.5],
-        differentiable: true,
-        doc: "glossiness g, Blinn-Phong exponent e = 2^(1 + 12·g) in [2, 8192]",
-    },
-    ParamSpec {
-        name: "normal",
-        channels: 3,
-        range: (-1.0, 1.0),
-        encoding: Encoding::UnitNormal,
-        color_space: ColorSpace::UnitVector,
-        default: &[0.0, 0.0, 1.0],
-        differentiable: true,
-        doc: "shading normal (x right, y up, z out), normalised before use",
-    },
-];
+/// The specular albedo: the shared [`SPECULAR`] map, documented for a lobe without Fresnel.
+const SPECULAR_KS: ParamSpec = ParamSpec {
+    doc: "specular albedo k_s (no Fresnel: the same at every angle), linear rgb",
+    ..SPECULAR
+};
+
+/// Glossiness g ∈ [0, 1], mapped to the exponent by [`exponent`].
+const GLOSSINESS: ParamSpec = ParamSpec {
+    name: "glossiness",
+    channels: 1,
+    range: (0.0, 1.0),
+    encoding: Encoding::Linear,
+    color_space: ColorSpace::Linear,
+    default: &[0.5],
+    differentiable: true,
+    doc: "glossiness g, Blinn-Phong exponent e = 2^(1 + 12·g) in [2, 8192]",
+};
 
 /// Lambert + normalised Blinn–Phong.
 pub struct BlinnPhong;
@@ -126,15 +101,7 @@ pub fn blinn_phong_specular(
     Ok(specular.broadcast_mul(&scalar)?)
 }
 
-impl DifferentiableBrdf for BlinnPhong {
-    fn name(&self) -> String {
-        "blinn_phong".into()
-    }
-
-    fn params(&self) -> &[ParamSpec] {
-        PARAMS
-    }
-
+impl Reflectance for BlinnPhong {
     fn eval(&self, wi: &Tensor, wo: &Tensor, maps: &MaterialMaps) -> Result<Tensor> {
         // Shared geometry: cosines floored at 0 and the 0/1 below-horizon mask, exactly as
         // the built-in models use it.
@@ -146,16 +113,9 @@ impl DifferentiableBrdf for BlinnPhong {
     }
 }
 
-fn construct(_: &BrdfArgs) -> Result<Brdf> {
-    Ok(Arc::new(BlinnPhong))
-}
-
-register_brdf!(BrdfRegistration {
+register_brdf! {
     name: "blinn_phong",
     summary: "Lambert + energy-normalised Blinn-Phong (e+2)/(8π)·(n·h)^e, e = 2^(1+12·glossiness)",
-    params: PARAMS,
-    replaces: &[],
-    takes_nested: false,
-    args: &[],
-    construct,
-});
+    params: &[DIFFUSE, SPECULAR_KS, GLOSSINESS, NORMAL],
+    model: |_| Ok(BlinnPhong),
+}

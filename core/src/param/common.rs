@@ -1,7 +1,12 @@
-//! Parameter specs shared by several built-in models, so that `diffuse` means the same map
-//! (range, encoding, file colour space) in every model that takes one.
+//! The parameter maps that several models share, so that `diffuse` means the same map
+//! (range, encoding, file colour space, default) in every model that takes one — built-in or
+//! a user's plugin. A model whose map differs only in its documentation line reuses the spec
+//! with struct update syntax: `ParamSpec { doc: "…", ..SPECULAR }`.
+//!
+//! The α floor quoted by [`ROUGHNESS`] lives in [`crate::microfacet`]; the unit-normal
+//! decoding of [`NORMAL`] in [`super::Encoding::UnitNormal`].
 
-use photomat_core::{ColorSpace, Encoding, ParamSpec};
+use super::{ColorSpace, Encoding, ParamSpec};
 
 /// Diffuse albedo ρ_d (rgb, linear reflectance).
 pub const DIFFUSE: ParamSpec = ParamSpec {
