@@ -212,8 +212,8 @@ def tilted(theta_deg, phi_deg, length=1.0):
 
 
 def extreme_ggx_cases():
-    """Tagged extreme cases (DESIGN §3 / issue 3): roughness at its floor and at 1, grazing,
-    below the horizon, tilted and degenerate normals, albedo at 0 and 1."""
+    """Tagged extreme cases (docs/plugins.md, "Evaluation contract"): roughness at its floor
+    and at 1, grazing, below the horizon, tilted and degenerate normals, albedo at 0 and 1."""
     d0, s0 = v32([0.2, 0.5, 0.8]), v32([0.9, 0.6, 0.04])
     out = []
 
@@ -675,7 +675,8 @@ def bumpmap_normals(height, rows, cols, scale_, weights=None):
 
 
 def central_difference_normals(height, rows, cols, scale_):
-    """f64 central differences with wrap-around (DESIGN §3), to verify the bumpmap reading."""
+    """f64 central differences with wrap-around (docs/conventions.md, "Height adapter"), to
+    verify the bumpmap reading."""
     out = [[], [], []]
     for i in range(rows):
         for j in range(cols):
@@ -888,7 +889,8 @@ def render_golden(stem, model, size, highlight, maps):
         kind="render",
         model=model,
         description=(
-            "Mitsuba 3 render of a textured unit plane under the collocated flash (DESIGN §2): "
+            "Mitsuba 3 render of a textured unit plane under the collocated flash "
+            "(docs/conventions.md#radiance): "
             "`direct` integrator, one unjittered sample per pixel centre, perspective camera and "
             "point light (intensity π) at (lx, ly, 1), one scene per lobe, summed. Maps and "
             "radiance are NCHW without the batch axis, flattened, row 0 at the top (+y)."

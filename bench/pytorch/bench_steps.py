@@ -1,6 +1,6 @@
 """Whole-step and per-op CPU timings of photomat's networks in plain PyTorch.
 
-The PyTorch half of the side-by-side benchmark (issue 5): the same cases, options and JSON
+The PyTorch half of the side-by-side benchmark: the same cases, options and JSON
 schema as `photomat bench` (cli/src/commands/bench.rs); `bench/compare.py` runs both and
 prints the table. What each case measures is listed in `CASES` and in bench/README.md.
 
@@ -44,7 +44,7 @@ CASES = {
     "sgemm": "one 1024x1024 by 1024x1024 f32 matrix product (the GEMM ceiling)",
 }
 DEFAULT_CASES = list(CASES)
-R1_GAMMA_BASE = 0.0002  # DESIGN section 4: gamma = 0.0002 * res^2 / batch
+R1_GAMMA_BASE = 0.0002  # docs/neural-models.md, "GAN training": gamma = 0.0002 * res^2 / batch
 R1_INTERVAL = 16  # lazy R1 every 16 steps; the trainer scales the penalty by it
 MICRO_CHANNELS = 64
 
@@ -86,7 +86,7 @@ def time_case(fn, iters, warmup):
 
 
 def highlights(batch, gen):
-    """Highlights uniform in [-0.5, 0.5)^2 (DESIGN section 4), one per sample."""
+    """Highlights uniform in [-0.5, 0.5)^2 (docs/neural-models.md, "Training E"), one per sample."""
     xy = torch.rand(batch, 2, generator=gen, dtype=torch.float64) - 0.5
     return [(float(x), float(y)) for x, y in xy]
 

@@ -13,8 +13,9 @@ filters, same activations) and have exactly the same number of trainable paramet
 - M  (`generator/src/relight.rs`): per-texel MLP 35 -> 64 x 7 -> 3 on (B*H*W, C) rows.
 - D  (`generator/src/discriminator.rs`): StyleGAN2 residual discriminator on RGB || omega
   (6 channels) with minibatch standard deviation (group 4, 1 channel).
-- E  (`estimator/src/{unet,conv,upsample}.rs`; DESIGN section 4): UNet 32->32->64->128->256
-  ->256->256->128->64->32->n with circular padding and periodic bilinear x2 upsampling.
+- E  (`estimator/src/{unet,conv,upsample}.rs`; docs/neural-models.md, "Map estimator E"): UNet
+  32->32->64->128->256->256->256->128->64->32->n with circular padding and periodic bilinear x2
+  upsampling.
 - the `height(ggx)` decode and the collocated-flash render (`core/src/{param,lobes,
   microfacet,shading,render,flash}.rs`, `brdf-plugins/src/{ggx,height}.rs`).
 

@@ -33,7 +33,7 @@
 //! - `photomat sample [--model MODEL] --count N --out OUT [--gltf] [--mtlx] [--hextile]`: maps,
 //!   renders, contact sheet and renderer exports of sampled materials;
 //! - `photomat bench`: whole training and sampling steps timed (JSON), the Rust side of
-//!   `bench/compare.sh`.
+//!   `bench/compare.py`.
 
 use std::ffi::OsString;
 use std::io::Write;

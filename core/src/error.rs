@@ -2,7 +2,7 @@
 //!
 //! Every user-facing failure names what went wrong and where (model name, map name, file),
 //! following typetag's "unknown name lists the known names" and Mitsuba's "validate the
-//! parameter dictionary at once" conventions (see `shared/STYLE.md`).
+//! parameter dictionary at once" conventions (see `docs/plugins.md`, "Registry behaviour").
 
 use std::path::PathBuf;
 

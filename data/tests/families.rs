@@ -22,7 +22,7 @@ fn families_names_are_sorted_unique_and_complete() {
     sorted.sort_unstable();
     sorted.dedup();
     assert_eq!(names, sorted, "family names must be sorted and unique");
-    // Guard: the families of issue 4 item 4. Adding one means updating this list.
+    // Guard: the families README.md lists. Adding one means updating this list.
     assert_eq!(
         names,
         [

@@ -1,4 +1,4 @@
-//! Highlight detectors on rendered flash photos with a known flash position (issue 4 tests).
+//! Highlight detectors on rendered flash photos with a known flash position.
 //!
 //! The photos are made here, independently of the simulator: every procedural family rendered by
 //! the engine under a flash over the photo's side-2 square (`FlashGeometry::with_side`), then a

@@ -1,4 +1,4 @@
-//! `prepare` on a folder of good and bad files (issue 4 tests): every good photo (8- and
+//! `prepare` on a folder of good and bad files: every good photo (8- and
 //! 16-bit, grey, RGBA, JPEG with an EXIF orientation) is prepared, every bad one (corrupt,
 //! truncated, not an image, 1×1, CMYK, GIF, empty) is reported with its reason, re-running only
 //! processes new files, and the simulator's true highlights follow the crop and resize.

@@ -6,9 +6,10 @@
 //! the neural relighting of F; §4 "Implementation" fixes it as a UNet with five down- and
 //! five up-sampling levels, 32→32→64→128→256→256→256→128→64→32→n.
 //!
-//! Here the BRDF is any registered plugin (DESIGN §3–4): n is the plugin's channel count, E
-//! outputs unconstrained raw values and the plugin's `decode` maps them into physical
-//! ranges (applying the reference's tanh head exactly once, see [`unet`]).
+//! Here the BRDF is any registered plugin (`docs/plugins.md`, "Parameter maps";
+//! `docs/neural-models.md`, "Map estimator E"): n is the plugin's channel count, E outputs
+//! unconstrained raw values and the plugin's `decode` maps them into physical ranges (applying the
+//! reference's tanh head exactly once, see [`unet`]).
 //!
 //! - [`Estimator`] / [`EstimatorConfig`]: the UNet ([`unet`]).
 //! - [`EstimatorModel`] ([`model_files`]): a trained E on disk with the BRDF it decodes into.

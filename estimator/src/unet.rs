@@ -4,7 +4,8 @@
 //! trained for) and §4 "Implementation" (the architecture: a UNet with skip connections,
 //! five down- and five up-sampling levels, channels
 //! 32→32→64→128→256→256→256→128→64→32→n). Layer details follow the reference `MatUnet`
-//! (`training/networks.py`, `layer_n = 5`, no batch norm) and DESIGN §4:
+//! (`training/networks.py`, `layer_n = 5`, no batch norm) and `docs/neural-models.md`, "Map
+//! estimator E":
 //!
 //! ```text
 //! F (B,32,H,W)

@@ -23,11 +23,12 @@
 //! tileable estimator, hence the deviation (recorded in the crate docs).
 //!
 //! # Implementation
-//! candle 0.11 has no backward pass for its bilinear upsampling (DESIGN §6), so the operator is
-//! written as `U_H · X · U_Wᵀ` with the sparse (2N × N) interpolation matrix `U` of
-//! [`periodic_upsample_matrix`] stored densely: two matmuls, whose gradients are exact
-//! (`Uᵀ · G · U`). The matrices are constants; candle's matmul backward still computes
-//! (and drops) a gradient for them, which makes the backward ≈ 3 matmuls instead of 2.
+//! candle 0.11 has no backward pass for its bilinear upsampling (`docs/candle-notes.md`, "Gradients
+//! that are wrong or missing, with no error"), so the operator is written as `U_H · X · U_Wᵀ` with
+//! the sparse (2N × N) interpolation matrix `U` of [`periodic_upsample_matrix`] stored densely: two
+//! matmuls, whose gradients are exact (`Uᵀ · G · U`). The matrices are constants; candle's matmul
+//! backward still computes (and drops) a gradient for them, which makes the backward ≈ 3 matmuls
+//! instead of 2.
 
 use candle_core::{DType, Device, Result, Tensor, bail};
 

@@ -1,6 +1,6 @@
-//! Properties of the map estimator E (paper §4 "Implementation", DESIGN §4): its head fits every
-//! registered BRDF plugin, it is tileable (commutes with rolls by the total stride, keeps
-//! periodic features periodic), its size is the paper's, and it trains.
+//! Properties of the map estimator E (paper §4 "Implementation"; `docs/neural-models.md`, "Map
+//! estimator E"): its head fits every registered BRDF plugin, it is tileable (commutes with rolls
+//! by the total stride, keeps periodic features periodic), its size is the paper's, and it trains.
 
 use candle_core::{DType, Device, Result, Shape, Tensor};
 use candle_nn::{AdamW, Optimizer, ParamsAdamW, VarBuilder, VarMap};

@@ -1,4 +1,4 @@
-//! Properties of the estimator losses (DESIGN §4 "Gram loss in the reference"): zero for
+//! Properties of the estimator losses (`docs/neural-models.md`, "Gram loss"): zero for
 //! identical images, Gram gradient against central finite differences in f64, translation
 //! invariance of the Gram term over periodic images, and the VGG19 loading path with small
 //! synthetic files of the torchvision layout.

@@ -1,6 +1,7 @@
-//! Estimator training on a tiny frozen G/M (PhotoMat §3 "Material map estimator"; DESIGN §4):
-//! the loss goes down, the roll fine-tune keeps E tileable, a resumed run is bit-identical to
-//! an uninterrupted one, and mismatched GAN/estimator shapes are refused with both numbers.
+//! Estimator training on a tiny frozen G/M (PhotoMat §3 "Material map estimator";
+//! `docs/neural-models.md`, "Training E"): the loss goes down, the roll fine-tune keeps E tileable,
+//! a resumed run is bit-identical to an uninterrupted one, and mismatched GAN/estimator shapes are
+//! refused with both numbers.
 
 use candle_core::{Device, Tensor};
 use photomat_brdfs as _; // link the built-in plugins into the registry

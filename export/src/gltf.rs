@@ -4,11 +4,11 @@
 //!
 //! [`write_gltf`] writes `<stem>.gltf` (JSON) and `<stem>.bin` (the quad's vertex data) next to
 //! the texture set's PNGs. The document is built from serde structs, never pasted text:
-//! - **mesh**: the unit square of DESIGN §2 in the XY plane facing +Z (4 vertices: POSITION,
-//!   NORMAL = +Z, TANGENT = (+X, w = 1; only with a normal texture), TEXCOORD_0 with (0, 0) at the top-left corner as glTF
-//!   and our image rows agree; 2 triangles, counter-clockwise seen from +Z). With
-//!   bitangent = N × T · w = +Y, tangent space is the plane frame, so our normal maps (+y up)
-//!   are glTF normal textures unchanged.
+//! - **mesh**: the unit square of `docs/conventions.md` ("The material plane") in the XY plane
+//!   facing +Z (4 vertices: POSITION, NORMAL = +Z, TANGENT = (+X, w = 1; only with a normal
+//!   texture), TEXCOORD_0 with (0, 0) at the top-left corner as glTF and our image rows agree; 2
+//!   triangles, counter-clockwise seen from +Z). With bitangent = N × T · w = +Y, tangent space is
+//!   the plane frame, so our normal maps (+y up) are glTF normal textures unchanged.
 //! - **material**: `pbrMetallicRoughness` (base colour texture, metallic 0, roughness from G of
 //!   the metallic-roughness texture), `normalTexture`, `KHR_materials_specular`
 //!   (`specularColorTexture` = F0, `specularColorFactor` = 1/0.04) and, for two-lobe models,

@@ -1,6 +1,6 @@
 //! # photomat-export
 //!
-//! Renderer-ready exports of photomat materials (issue 7, "Sampling"):
+//! Renderer-ready exports of photomat materials:
 //!
 //! - [`textures`]: a material's maps as the 8-bit textures renderers read (sRGB base and
 //!   specular colour, packed roughness, tangent-space normal, clear coat), with the per-plugin

@@ -76,7 +76,8 @@ fn median_ms(v: &[f64]) -> f64 {
 
 fn main() -> Result<()> {
     // R1 is a double backward: candle keeps the first backward's graph only with this flag,
-    // read at the thread's first backward() (DESIGN §6). Set before any other thread exists.
+    // read at the thread's first backward() (`docs/candle-notes.md`). Set before any other
+    // thread exists.
     // SAFETY: single-threaded at this point (no rayon pool has been started yet).
     unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
     let mut positional = Vec::new();

@@ -2,8 +2,9 @@
 //!
 //! StyleGAN2 (Karras et al. 2020; `bias_act` in the StyleGAN2-ADA code) multiplies the
 //! LeakyReLU output by √2 so that, with equalised learning rate, the signal variance is kept
-//! from layer to layer (He initialisation for a leaky rectifier). DESIGN §4 prescribes it for
-//! the mapping network, the synthesis layers, M and D.
+//! from layer to layer (He initialisation for a leaky rectifier). `docs/neural-models.md`
+//! ("Relightable generator G") prescribes it for the mapping network, the synthesis layers,
+//! M and D.
 //!
 //! On the CPU this is photomat-kernels' fused LeakyReLU ([`photomat_kernels::leaky_relu_gain`],
 //! and [`photomat_kernels::bias_leaky_relu_gain`] with the preceding bias add fused in,

@@ -243,7 +243,7 @@ pub fn minibatch_stddev(x: &Tensor, group_size: usize, channels: usize) -> Resul
     }
     let groups = b.div_ceil(group_size.min(b));
     // Samples of group m: m, m + groups, m + 2·groups, … (narrow + cat: exact second
-    // derivatives, DESIGN §6).
+    // derivatives, `docs/candle-notes.md`).
     let members = |m: usize| -> Result<Tensor> {
         let parts = (m..b)
             .step_by(groups)
@@ -274,7 +274,8 @@ impl Discriminator {
     /// trainer applies γ/2 and the batch mean).
     ///
     /// This is a double backward: candle 0.11 detaches gradients unless
-    /// `CANDLE_GRAD_DO_NOT_DETACH=1` is set before the thread's first `backward()` (DESIGN §6).
+    /// `CANDLE_GRAD_DO_NOT_DETACH=1` is set before the thread's first `backward()`
+    /// (`docs/candle-notes.md`, "Second-order gradients").
     /// A detached input gradient is detected here and reported as an error instead of
     /// returning a penalty whose parameter gradient would silently be zero.
     ///

@@ -27,7 +27,7 @@
 //! through D's blur and downsampling). Inside [`photomat_kernels::with_reference_ops`] (and on
 //! other devices) the same matrices are applied densely with candle's `matmul` ([`apply_separable`]),
 //! whose first and second derivatives are exact in candle 0.11, where `upsample_nearest2d`'s
-//! backward is wrong and depthwise convolution is ≈ 80× slower (DESIGN §6).
+//! backward is wrong and depthwise convolution is ≈ 80× slower (`docs/candle-notes.md`).
 
 use candle_core::{DType, Device, Result, Tensor};
 use photomat_kernels::AxisMatrix;

@@ -1,7 +1,6 @@
 //! Seeded parameter initialisation: a [`VarBuilder`] whose new variables are drawn from a
 //! seeded generator, so that model construction is reproducible on the CPU (candle's CPU
-//! generator cannot be seeded; the issue asks for training runs that are deterministic given
-//! a seed).
+//! generator cannot be seeded, and training runs must be deterministic given a seed).
 //!
 //! The builder creates variables in a [`VarMap`] exactly as `VarBuilder::from_varmap` does,
 //! honouring each layer's [`Init`] hint (constants, N(mean, stdev²), uniform), but the values

@@ -5,8 +5,8 @@
 //! (PyTorch `padding_mode='circular'`), so each feature map is one period of an infinite
 //! periodic image and the network commutes with rolls. Circular padding is the shared
 //! `photomat_kernels::circular_pad_dim` (the estimator uses the same), built from `narrow` +
-//! `cat`, whose first and second derivatives are exact in candle 0.11 (DESIGN §6). Zero padding
-//! uses candle's `pad_with_zeros` (also exact).
+//! `cat`, whose first and second derivatives are exact in candle 0.11 (`docs/candle-notes.md`).
+//! Zero padding uses candle's `pad_with_zeros` (also exact).
 
 use candle_core::{Result, Tensor};
 

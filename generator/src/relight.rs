@@ -1,12 +1,13 @@
 //! The relighting MLP M (PhotoMat paper §3 "Relightable generator" and §4 "Implementation";
-//! reference facts in DESIGN §4).
+//! reference facts in `docs/neural-models.md`, "Relighting MLP M").
 //!
 //! Per texel, M maps the neural material's features and the light direction to an RGB value:
 //! input `F ‖ ω` (32 + 3 = 35 channels), 8 fully connected layers 35 → 64 → … → 64 → 3,
 //! `lrelu` (LeakyReLU 0.2 × √2) after the first seven, the last linear. The output lives in
-//! the networks' encoded image space (`2·encoded − 1`, nominally [−1, 1]; DESIGN §2) and is not
-//! clamped, so the discriminator's gradient never vanishes at the range ends; clamp only for
-//! display. Every layer is an equalised-lr [`EqualizedLinear`] with lr multiplier 0.01.
+//! the networks' encoded image space (`2·encoded − 1`, nominally [−1, 1]; `docs/conventions.md`,
+//! "Image values") and is not clamped, so the discriminator's gradient never vanishes at the range
+//! ends; clamp only for display. Every layer is an equalised-lr [`EqualizedLinear`] with lr
+//! multiplier 0.01.
 //!
 //! On the CPU, M runs as photomat-kernels' fused per-texel MLP
 //! ([`photomat_kernels::per_texel_mlp`]: texel rows in cache-sized blocks, one `gemm` per layer,

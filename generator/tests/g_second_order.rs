@@ -4,7 +4,8 @@
 //! noise + bias + lrelu epilogue, sparse FIR), whose backward passes are built from ops with a
 //! backward; this checks that the double backward through them equals the one through plain
 //! candle ops, in zero-padded and tileable mode. One test: it sets
-//! `CANDLE_GRAD_DO_NOT_DETACH=1` before any backward pass (DESIGN §6).
+//! `CANDLE_GRAD_DO_NOT_DETACH=1` before any backward pass
+//! (`docs/candle-notes.md`, "Second-order gradients").
 
 mod common;
 

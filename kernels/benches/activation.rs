@@ -1,8 +1,8 @@
 //! StyleGAN2's `lrelu` (slope 0.2, gain √2), without and with the per-channel bias add,
 //! forward + backward: the fused [`photomat_kernels::leaky_relu_gain`] /
 //! [`photomat_kernels::bias_leaky_relu_gain`] against `broadcast_add` and the composite
-//! `g·(1 − a)·relu(x) + g·a·x` of candle ops (the form DESIGN §6 measured fastest among candle
-//! compositions), paired in one process.
+//! `g·(1 − a)·relu(x) + g·a·x` of candle ops (the form measured fastest among candle
+//! compositions, `docs/candle-notes.md`, "Speed"), paired in one process.
 //!
 //! Run (docs/benchmarks.md, "Fused LeakyReLU", records the numbers):
 //!

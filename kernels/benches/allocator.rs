@@ -15,9 +15,10 @@
 //! both alike; the bench prints the median time per pass and the median of the per-round
 //! ratios system ÷ mimalloc.
 //!
-//! Workload (StyleGAN2's activation path, DESIGN §4, as plain candle ops): for a Var x and
-//! constant bias b, `y = √2 · max(x + b, 0.2·(x + b))`, loss `Σ y²`, then `loss.backward()`:
-//! ≈ 15 element-wise ops of the input's size, each allocating its output.
+//! Workload (StyleGAN2's activation path, `docs/neural-models.md`, "Relightable generator G", as
+//! plain candle ops): for a Var x and constant bias b, `y = √2 · max(x + b, 0.2·(x + b))`,
+//! loss `Σ y²`, then `loss.backward()`: ≈ 15 element-wise ops of the input's size, each
+//! allocating its output.
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;

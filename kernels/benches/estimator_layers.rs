@@ -1,5 +1,6 @@
-//! The estimator's circular conv layers (DESIGN §4, E at 256², batch 4), forward + backward:
-//! its previous path against [`photomat_kernels::conv2d`], paired in one process.
+//! The estimator's circular conv layers (`docs/neural-models.md`, "Map estimator E"; E at 256²,
+//! batch 4), forward + backward: its previous path against [`photomat_kernels::conv2d`], paired in
+//! one process.
 //!
 //! Run (docs/benchmarks.md, "Estimator layers", records the numbers):
 //!

@@ -4,18 +4,18 @@
 //! `f(x) = g·x` for x > 0, `g·a·x` otherwise, with PyTorch's derivative `f'(x) = g` for x > 0
 //! and `g·a` otherwise (so `g·a` at exactly 0). The estimator uses slope 0.01, gain 1 (paper
 //! §4 "Implementation"; the reference's `nn.LeakyReLU()`); the StyleGAN2 networks slope 0.2,
-//! gain √2 (DESIGN §4, `bias_act`'s `lrelu`).
+//! gain √2 (`docs/neural-models.md`, "Relightable generator G"; `bias_act`'s `lrelu`).
 //!
 //! candle 0.11 element-wise ops allocate per call, and a composite LeakyReLU costs 2–5 ops
 //! forward and ≈ 12 backward (`maximum`'s backward builds two masks, divides and accumulates;
-//! DESIGN §6). On the CPU this module runs one pass each way through candle custom ops, split
-//! over rayon for tensors of more than 65,536 elements; other devices use the equivalent
-//! `g·max(x, a·x)` composite.
+//! `docs/candle-notes.md`, "Speed"). On the CPU this module runs one pass each way through candle
+//! custom ops, split over rayon for tensors of more than 65,536 elements; other devices use the
+//! equivalent `g·max(x, a·x)` composite.
 //!
 //! The backward is itself a custom op with a backward, so gradients through it can be
-//! differentiated again (R1 through D, path length through G; DESIGN §4): the input gradient
-//! `dx = dy ⊙ f'(x)` is linear in `dy` with the same factor, and `f'` is piecewise constant,
-//! so its derivative w.r.t. x is zero wherever it exists.
+//! differentiated again (R1 through D, path length through G; `docs/neural-models.md`, "GAN
+//! training"): the input gradient `dx = dy ⊙ f'(x)` is linear in `dy` with the same factor, and
+//! `f'` is piecewise constant, so its derivative w.r.t. x is zero wherever it exists.
 
 use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Result, Shape, Tensor, bail};

@@ -3,10 +3,10 @@
 //! **Allocator.** candle 0.11 allocates a fresh output buffer for every op. With glibc's
 //! malloc, buffers above the dynamic mmap threshold (≤ 32 MiB) are mapped and unmapped per
 //! call or trimmed off the heap top, so element-wise passes spend much of their time in page
-//! faults (`docs/benchmarks.md`, "BRDF evaluation throughput"; DESIGN §6). mimalloc
-//! (Leijen, Zorn & de Moura, "Mimalloc: free list sharding in action", APLAS 2019) keeps
-//! freed pages mapped and reuses them. Measured here on element-wise backward passes it is
-//! faster by the ratios in `docs/benchmarks.md` ("Global allocator"), bench
+//! faults (`docs/benchmarks.md`, "BRDF evaluation throughput"; `docs/candle-notes.md`, "Speed").
+//! mimalloc (Leijen, Zorn & de Moura, "Mimalloc: free list sharding in action", APLAS 2019) keeps
+//! freed pages mapped and reuses them. Measured here on element-wise backward passes it is faster
+//! by the ratios in `docs/benchmarks.md` ("Global allocator"), bench
 //! `kernels/benches/allocator.rs`.
 //!
 //! A library must not pick the process allocator, so this is an opt-in for binaries: enable

@@ -5,11 +5,12 @@
 //! unpadded `F.conv2d`) treat every feature map as one period of an infinite periodic image:
 //! the texel left of column 0 is column W − 1. Padding that way before each convolution makes
 //! the network commute with `roll` (shift equivariance), which is what makes tileable
-//! sampling and the roll fine-tune of DESIGN §4 possible.
+//! sampling and the estimator's roll fine-tune (`docs/neural-models.md`, "Training E") possible.
 //!
 //! Implemented with `narrow` + `cat` only, whose forward and backward passes are exact (and
-//! twice differentiable) in candle 0.11 (DESIGN §6). Padded row `r` of an input of height H
-//! holds input row `(r − top) mod H`, and likewise for columns.
+//! twice differentiable) in candle 0.11 (`docs/candle-notes.md`, "Gradients that were checked and
+//! are right"). Padded row `r` of an input of height H holds input row `(r − top) mod H`, and
+//! likewise for columns.
 
 use candle_core::{Result, Tensor, bail};
 

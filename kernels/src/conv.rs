@@ -1,7 +1,7 @@
 //! 2-D convolution on the CPU as candle custom ops: im2col + `gemm`, with zero or circular
 //! padding, whose forward, input gradient and weight gradient are each a custom op whose own
 //! backward is built from the other two — so the op is differentiable to any order (R1 in
-//! the discriminator, DESIGN §4).
+//! the discriminator, `docs/neural-models.md`, "GAN training").
 //!
 //! Follows the standard lowering of a convolution to a matrix product (Chellapilla, Puri &
 //! Simard, "High performance convolutional neural networks for document processing", 2006;
@@ -10,7 +10,7 @@
 //! - forward: `y (C_out × N) = W (C_out × K) · col(x) (K × N)`;
 //! - input gradient: `dx = col2im(Wᵀ (K × C_out) · dy (C_out × N))`, `col2im` the adjoint of
 //!   `col` (scatter-add, wrap-around for circular padding) — candle's CPU path uses a slow
-//!   direct-loop `conv_transpose2d` here (DESIGN §6);
+//!   direct-loop `conv_transpose2d` here (`docs/candle-notes.md`, "Speed");
 //! - weight gradient: `dW (C_out × K) = Σ_images dy (C_out × N) · col(x)ᵀ (N × K)`.
 //!
 //! `col(x)` is never materialised whole: it is built for a band of output rows at a time
@@ -97,8 +97,8 @@ pub fn conv2d(x: &Tensor, w: &Tensor, spec: Conv2dSpec) -> Result<Tensor> {
 
 /// The same convolution from candle's own ops: circular padding by `narrow` + `cat`, then
 /// candle's `conv2d` (zero padding by its `padding` argument). Exact and differentiable to any
-/// order (DESIGN §6); the reference the tests compare against and the path for devices and
-/// dtypes [`conv2d`] does not handle.
+/// order (`docs/candle-notes.md`, "Gradients that were checked and are right"); the reference the
+/// tests compare against and the path for devices and dtypes [`conv2d`] does not handle.
 ///
 /// # Shapes
 /// As [`conv2d`].

@@ -3,9 +3,10 @@
 //! candle 0.11 differentiates `conv2d` exactly, but on the CPU the input gradient goes through
 //! a direct-loop `conv_transpose2d`: on the estimator's layers it ran at 0.2–0.8 GFLOP/s on
 //! the 2-core build machine (e.g. 3×3, 96→32, 32², batch 4: 274 ms against 32 ms for the
-//! forward conv2d), making E's backward pass ≈ 10× slower than its forward (DESIGN §6 measured
-//! the same path at ≈ 11 GFLOP/s on a larger layer). Here the input gradient is computed with `conv2d` itself
-//! (im2col + gemm), the standard polyphase decomposition of a transposed convolution:
+//! forward conv2d), making E's backward pass ≈ 10× slower than its forward (`docs/candle-notes.md`,
+//! "Speed", measured the same path at ≈ 11 GFLOP/s on a larger layer). Here the input gradient is
+//! computed with `conv2d` itself (im2col + gemm), the standard polyphase decomposition of a
+//! transposed convolution:
 //!
 //! For `y[i] = Σ_a x[s·i + a]·w[a]` (stride s, k taps, k a multiple of s), input position
 //! `p = s·m + r` (phase r < s) receives `∂L/∂x[s·m + r] = Σ_t g[m − t]·w[s·t + r]`, a *full*
@@ -196,8 +197,8 @@ mod tests {
 
     #[test]
     fn fast_backward_matches_candle_conv2d_backward() -> Result<()> {
-        // candle's conv2d backward is exact (DESIGN §6, checked against PyTorch and finite
-        // differences); the polyphase pass must agree to f64 rounding.
+        // candle's conv2d backward is exact (`docs/candle-notes.md`, checked against PyTorch and
+        // finite differences); the polyphase pass must agree to f64 rounding.
         let dev = Device::Cpu;
         // (4, 2, 11, 9): (H − k) odd, so the last input row and column are never read.
         let cases = [

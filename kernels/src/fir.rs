@@ -10,13 +10,14 @@
 //!
 //! Each pass `y = M ×_axis x` is linear in `x`, so its backward is the pass of `Mᵀ` on the
 //! output gradient, and the backward of that is the pass of `M` again: the op is
-//! differentiable to any order (R1 through the discriminator's blur and downsampling, DESIGN
-//! §4), with no derivative w.r.t. the constant matrix.
+//! differentiable to any order (R1 through the discriminator's blur and downsampling,
+//! `docs/neural-models.md`, "GAN training"), with no derivative w.r.t. the constant matrix.
 //!
 //! CPU tensors of dtype f32 and f64 take the sparse path, split over rayon above 65,536
 //! output elements. Other devices and dtypes, and every call inside
 //! [`crate::reference::with_reference_ops`], use [`separable_reference`]: dense matrices and
-//! candle's `matmul`, whose first and second derivatives are exact in candle 0.11 (DESIGN §6).
+//! candle's `matmul`, whose first and second derivatives are exact in candle 0.11
+//! (`docs/candle-notes.md`, "Gradients that were checked and are right").
 
 use std::sync::Arc;
 

@@ -1,9 +1,9 @@
 //! # photomat-kernels
 //!
-//! Fast CPU kernels for photomat's networks (issue 5), as candle 0.11 custom ops, each with
+//! Fast CPU kernels for photomat's networks, as candle 0.11 custom ops, each with
 //! its backward pass. candle's own CPU path runs this project's layers 5–8× slower than
-//! PyTorch CPU (DESIGN §6); the generator and the estimator call these ops instead where they
-//! measure faster (numbers in `docs/benchmarks.md`).
+//! PyTorch CPU (`docs/candle-notes.md`, "Speed"); the generator and the estimator call these ops
+//! instead where they measure faster (numbers in `docs/benchmarks.md`).
 //!
 //! - [`conv2d`]: im2col + `gemm` convolution with zero or circular padding, forward, input
 //!   gradient and weight gradient each a custom op, differentiable to any order ([`conv`]).
@@ -23,8 +23,8 @@
 //! - [`testing`]: tensor comparisons for tests and benchmarks (their seeded inputs come from
 //!   `photomat_core::rng`, a dev-dependency).
 //!
-//! Conventions follow DESIGN §2: NCHW tensors, f32 for training (f64 accepted by every op so
-//! that gradient tests can be tight).
+//! Conventions follow `docs/conventions.md`, "Image values": NCHW tensors, f32 for training (f64
+//! accepted by every op so that gradient tests can be tight).
 
 pub mod activation;
 pub mod alloc;

@@ -1,12 +1,12 @@
 //! Second-order gradients through [`photomat_kernels::conv2d`] and
 //! [`photomat_kernels::bias_leaky_relu_gain`]: the R1 penalty of a small
-//! discriminator-like network (DESIGN §4: lazy R1 = ‖∂D(x)/∂x‖², differentiated w.r.t. the
-//! weights) equals the same computation through candle's own `conv2d` and composite
-//! LeakyReLU, and f64 central differences.
+//! discriminator-like network (`docs/neural-models.md`, "GAN training": lazy R1 = ‖∂D(x)/∂x‖²,
+//! differentiated w.r.t. the weights) equals the same computation through candle's own `conv2d` and
+//! composite LeakyReLU, and f64 central differences.
 //!
 //! candle keeps the graph of a backward pass only when `CANDLE_GRAD_DO_NOT_DETACH` is set
-//! before the thread's first `backward()` (DESIGN §6); this file holds a single test, which
-//! sets it first.
+//! before the thread's first `backward()` (`docs/candle-notes.md`, "Second-order gradients"); this
+//! file holds a single test, which sets it first.
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use photomat_core::rng::pseudo_random;

@@ -16,7 +16,7 @@ fn bundled() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/demo")
 }
 
-/// Shipping budget of the model folder's weights: "a few MB" (issue 7).
+/// Shipping budget of the model folder's weights: "a few MB" (README.md, `models/demo/`).
 const MAX_BUNDLED_BYTES: u64 = 8 << 20;
 
 /// Mean analytic-vs-neural L1 (encoded [−1, 1] space, 5 lights) the bundled estimator must

@@ -125,7 +125,8 @@ fn cli_render_light_matches_the_core_renderer() {
 
 #[test]
 fn cli_render_flat_white_lambert_is_white_under_the_flash() {
-    // A flat white Lambertian texel straight under the flash renders exactly 1 (DESIGN §2).
+    // A flat white Lambertian texel straight under the flash renders exactly 1
+    // (`docs/conventions.md`, "Radiance").
     let size = 8;
     let brdf = model("lambert");
     let maps = MaterialMaps::defaults(brdf.params(), 1, size, DType::F32, &Device::Cpu)

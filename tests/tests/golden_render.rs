@@ -11,9 +11,9 @@ use candle_core::DType;
 use photomat_core::{Highlight, MaterialMaps, lookup, render_radiance};
 use support::{RenderGolden, Report, channels, exceeds, f32_exact, load, map_tensor};
 
-/// Per-pixel radiance, relative (the bound for renders).
+/// Per-pixel radiance, relative (the bound for renders in golden/README.md, "Tolerances").
 const F64_TOL: f64 = 1e-5;
-/// f32 renders: the 1e-5 too; measured worst 1.5e-6 since the microfacet terms are
+/// f32 renders: the same 1e-5; measured worst 1.5e-6 since the microfacet terms are
 /// computed without cancellation (golden/FINDINGS.md).
 const F32_TOL: f64 = 1e-5;
 

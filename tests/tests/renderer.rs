@@ -1,6 +1,6 @@
-//! The collocated-flash renderer (DESIGN §2): exact values under the flash, the 1/d³ falloff
-//! of a Lambertian plane, highlight placement, batching, periodicity of the height adapter,
-//! decoding of raw network output, and clear errors for bad maps.
+//! The collocated-flash renderer (`docs/conventions.md`, "Radiance"): exact values under the flash,
+//! the 1/d³ falloff of a Lambertian plane, highlight placement, batching, periodicity of the height
+//! adapter, decoding of raw network output, and clear errors for bad maps.
 
 use candle_core::{DType, Device, Tensor};
 use photomat_brdfs::height::HeightToNormal;
@@ -263,7 +263,8 @@ fn renderer_rejects_bad_maps_with_clear_errors() {
 
 #[test]
 fn flash_geometry_of_a_crop_equals_the_photo_geometry_restricted_to_it() {
-    // A whole photo of 2R texels spans side 2; its R×R crops are unit squares (DESIGN §4).
+    // A whole photo of 2R texels spans side 2; its R×R crops are unit squares
+    // (`docs/datasets.md`, "Geometry of a photo").
     // Moving the highlight into crop coordinates must give exactly the photo's ω and 1/d².
     use photomat_core::FlashGeometry;
     let r = 16;

@@ -1,4 +1,4 @@
-//! `photomat train-estimator` end to end on a tiny GAN (issue 7): the run folder is a model
+//! `photomat train-estimator` end to end on a tiny GAN: the run folder is a model
 //! folder that `EstimatorModel::load` and `GanModel::load` both read, with a log and panels;
 //! `--resume` continues where the run stopped; contradicting flags and unknown models are
 //! reported by name.

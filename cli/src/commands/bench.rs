@@ -1,5 +1,6 @@
 //! `photomat bench`: time whole training and sampling steps of G, M, D and E, and the
-//! convolutions they are made of, for the side-by-side comparison with PyTorch CPU (issue 5).
+//! convolutions they are made of, for the side-by-side comparison with PyTorch CPU
+//! (`bench/README.md`).
 //!
 //! The PyTorch half is `bench/pytorch/bench_steps.py`: same cases, same options, same JSON
 //! schema; `bench/compare.py` runs both with equal thread counts and prints the table

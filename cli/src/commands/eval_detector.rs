@@ -1,5 +1,6 @@
 //! `photomat eval-detector --dataset DIR [--detector NAME]`: the highlight error of the
-//! detectors on a dataset prepared from `photomat simulate` output (issue 4 item 5).
+//! detectors on a dataset prepared from `photomat simulate` output (`docs/datasets.md`, "Highlight
+//! detectors").
 //!
 //! Re-runs each detector (default: all of them) on the dataset's images and compares with the
 //! true highlight that `prepare` copied from `simulation.json` (`truth_highlight_px`, moved

@@ -1,7 +1,7 @@
 //! `photomat eval-gan --gan RUN --data DATASET [--count 256] [--seed S] [--json]`: the GAN
-//! quality metric of issue 6 — the sliced Wasserstein distance on Laplacian-pyramid patches
-//! (ProGAN, Karras et al. 2018, appendix D; `photomat_generator::swd`) between `count` relit
-//! samples of the model in RUN and `count` real crops of DATASET.
+//! quality metric (`docs/neural-models.md`, "GAN training") — the sliced Wasserstein distance on
+//! Laplacian-pyramid patches (ProGAN, Karras et al. 2018, appendix D; `photomat_generator::swd`)
+//! between `count` relit samples of the model in RUN and `count` real crops of DATASET.
 //!
 //! The fakes are G's materials for seeds drawn from S, relit by M under lights drawn from the
 //! data set's highlight distribution (per-texel ω of the collocated flash); the reals are

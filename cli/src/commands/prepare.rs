@@ -1,6 +1,6 @@
 //! `photomat prepare --photos DIR --out DATASET [--size 512] [--detector robust|paper]
-//! [--reject-non-square]`: a folder of phone flash photos → a training dataset (issue 4;
-//! format in docs/datasets.md; paper §"Dataset collection").
+//! [--reject-non-square]`: a folder of phone flash photos → a training dataset (format
+//! in docs/datasets.md; paper §"Dataset collection").
 //!
 //! Reads JPEG and PNG (8/16-bit, grey/RGB/RGBA, EXIF orientation applied), centre-crops each
 //! photo to a square, resizes it to the working size in linear light (Lanczos3), detects the

@@ -1,5 +1,5 @@
 //! `photomat simulate --count N --size S --out DIR [--seed K] [--format jpg|png]`: phone-flash
-//! photos of procedural materials with their ground truth (issue 4; format in
+//! photos of procedural materials with their ground truth (format in
 //! docs/datasets.md): `DIR/photos/`, `DIR/truth/` (material folders of each photo's shading
 //! model over the photographed area) and `DIR/simulation.json` (family, seed, true highlight
 //! and camera per photo). The same `--seed` gives byte-identical output on any machine with

@@ -5,9 +5,10 @@
 //! replicated). Every way a file can be unusable is a [`Rejection`] with a reason a person
 //! can act on; nothing here panics on bad input (the prepare loop also catches decoder panics).
 //!
-//! Colour: photos are treated as gamma-2.2 encoded (DESIGN §2). Resizing averages light, so it
-//! runs on linearised values (Lanczos3, the `image` crate's resampler), and the result is
-//! re-encoded with gamma 2.2 and quantised to 8 bits, exactly what the dataset stores.
+//! Colour: photos are treated as gamma-2.2 encoded (`docs/conventions.md`, "Image values").
+//! Resizing averages light, so it runs on linearised values (Lanczos3, the `image` crate's
+//! resampler), and the result is re-encoded with gamma 2.2 and quantised to 8 bits, exactly what
+//! the dataset stores.
 
 use std::io::Cursor;
 

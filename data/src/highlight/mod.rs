@@ -1,7 +1,7 @@
 //! Flash-highlight detection: where the collocated flash sits above a flash photo.
 //!
-//! PhotoMat (paper §"Dataset collection", DESIGN §4 "Light detector") conditions its generator
-//! on the flash position of every real photo, found by "a simple highlight detector". Two
+//! PhotoMat (paper §"Dataset collection", `docs/neural-models.md`, "Light detector") conditions its
+//! generator on the flash position of every real photo, found by "a simple highlight detector". Two
 //! detectors implement [`HighlightDetector`]:
 //!
 //! | name     | file        | what it does                                                        |

@@ -1,5 +1,5 @@
 //! `paper`: the light detector of PhotoMat, exactly as the paper describes it (§"Dataset
-//! collection"; DESIGN §4 "Light detector").
+//! collection"; `docs/neural-models.md`, "Light detector").
 //!
 //! 1. intensity = per-pixel min(R, G, B), linearised with gamma 2.2;
 //! 2. threshold = the mean intensity;

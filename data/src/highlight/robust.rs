@@ -2,8 +2,9 @@
 //!
 //! The paper's centroid (§"Dataset collection", [`super::paper`]) is pulled towards the image
 //! centre by lens vignetting, by ambient light and by the image border cutting the flash lobe.
-//! This detector instead fits what a flash photo of a flat sample looks like (DESIGN §2,
-//! `docs/datasets.md`: the photo spans a square of side 2, flash and camera at height 1).
+//! This detector instead fits what a flash photo of a flat sample looks like
+//! (`docs/conventions.md`, "Radiance"; `docs/datasets.md`: the photo spans a square of side 2,
+//! flash and camera at height 1).
 //!
 //! # Model
 //! With `s = |p − l|` the distance of a plane point `p` from the point `l` under the flash, the

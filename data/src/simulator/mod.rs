@@ -1,4 +1,4 @@
-//! Phone-flash photo simulator (issue 4, item 4): procedural materials photographed by a
+//! Phone-flash photo simulator: procedural materials photographed by a
 //! simulated phone with its flash on, written with their ground truth.
 //!
 //! Photo `i` of a run: its family is the `i mod F`-th of the run's F families (so every family

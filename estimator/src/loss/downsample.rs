@@ -1,11 +1,11 @@
 //! Differentiable area downsampling: the 2×2 average of the Gram loss's image pyramid and of
 //! the feature extractors' pooling stages, and the N×N area average of the fine-tune's L1
-//! (DESIGN §4 "Map estimator E": "L1 on 16×16 downsamples").
+//! (`docs/neural-models.md`, "Training E": "0.1·L1 on 16×16 downsamples").
 //!
 //! Both are a reshape that splits each side into (blocks, block size) followed by means over
 //! the block axes: exact, and differentiable to any order with candle's own ops (candle's
-//! `avg_pool2d` is only correct when kernel = stride, DESIGN §6; this form needs no such
-//! caveat).
+//! `avg_pool2d` is only correct when kernel = stride, see `docs/candle-notes.md`; this form needs
+//! no such caveat).
 
 use candle_core::{Result, Tensor, bail};
 

@@ -1,4 +1,4 @@
-//! The feature extractor behind the Gram loss (DESIGN §4 "Gram loss in the reference"): an
+//! The feature extractor behind the Gram loss (`docs/neural-models.md`, "Gram loss"): an
 //! image → a list of feature maps, one per pooling stage, and the one network shape both
 //! implementations share.
 //!

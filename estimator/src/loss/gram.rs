@@ -1,5 +1,5 @@
 //! The Gram-matrix (texture) loss of the estimator (PhotoMat §3 "Material map estimator";
-//! reference details in DESIGN §4 "Gram loss in the reference"), after Gatys, Ecker & Bethge
+//! reference details in `docs/neural-models.md`, "Gram loss"), after Gatys, Ecker & Bethge
 //! (2015), "Texture synthesis using convolutional neural networks".
 //!
 //! For a feature map F with C channels over N = H·W texels, the Gram matrix is

@@ -1,9 +1,9 @@
-//! The L1 term of the estimator loss (PhotoMat §3 "Material map estimator"; DESIGN §4):
-//! mean absolute difference between the analytic render and the neural relighting, in the
-//! networks' encoded [−1, 1] image space. Stage 1 compares the images texel by texel; the
-//! fine-tune compares 16×16 area downsamples ([`FINETUNE_L1_SIZE`]), which keeps the colour
-//! and overall brightness tied to M while leaving the texel layout to the Gram term (the
-//! rolled maps no longer sit where M's image has them).
+//! The L1 term of the estimator loss (PhotoMat §3 "Material map estimator";
+//! `docs/neural-models.md`, "Training E"): mean absolute difference between the analytic render and
+//! the neural relighting, in the networks' encoded [−1, 1] image space. Stage 1 compares the images
+//! texel by texel; the fine-tune compares 16×16 area downsamples ([`FINETUNE_L1_SIZE`]), which
+//! keeps the colour and overall brightness tied to M while leaving the texel layout to the Gram
+//! term (the rolled maps no longer sit where M's image has them).
 
 use candle_core::{Result, Tensor, bail};
 

@@ -1,6 +1,6 @@
-//! Losses of the map estimator E (PhotoMat §3 "Material map estimator"; DESIGN §4): the
-//! analytic render of E's decoded maps is compared with the frozen relighter M's image by
-//! `0.1·L1 + 1.0·Gram`.
+//! Losses of the map estimator E (PhotoMat §3 "Material map estimator"; `docs/neural-models.md`,
+//! "Training E"): the analytic render of E's decoded maps is compared with the frozen relighter M's
+//! image by `0.1·L1 + 1.0·Gram`.
 //!
 //! - [`l1`]: plain L1 and L1 on 16×16 area downsamples (the fine-tune);
 //! - [`gram`]: Gram matrices `F Fᵀ/(HW)` of feature maps at scales 1, ½, ¼, mean absolute

@@ -1,6 +1,7 @@
 //! The documented fallback feature extractor of the Gram loss when no VGG19 weights are given
-//! (pretrained weights cannot be downloaded on the build machines, DESIGN §4): a seeded random
-//! multi-scale conv bank with VGG19's pooled five-stage structure but narrow.
+//! (pretrained weights cannot be downloaded on the build machines, `docs/neural-models.md`, "Gram
+//! loss"): a seeded random multi-scale conv bank with VGG19's pooled five-stage structure but
+//! narrow.
 //!
 //! Random-weight convolutional networks give usable texture statistics: Ustyuzhaninov,
 //! Brendel, Gatys & Bethge (2017), "What does it take to generate natural textures?" (ICLR),

@@ -1,5 +1,5 @@
 //! VGG19 features for the Gram loss, from torchvision-compatible weights in a safetensors file
-//! (DESIGN §4 "Gram loss in the reference": VGG19 with max-pools replaced by average pools,
+//! (`docs/neural-models.md`, "Gram loss": VGG19 with max-pools replaced by average pools,
 //! features after pool1 … pool5, ImageNet-normalised input).
 //!
 //! Network: torchvision's `vgg19().features` (Simonyan & Zisserman 2015, configuration E):

@@ -1,7 +1,7 @@
 //! Hyper-parameters of the estimator's training (PhotoMat §3 "Material map estimator" and §4;
-//! the reference's values in DESIGN §4): two stages, Adam, loss weights, the feature
-//! extractor of the Gram term and the run seed. Saved as JSON next to every checkpoint so a
-//! resumed run can refuse contradicting settings by name.
+//! the reference's values in `docs/neural-models.md`, "Training E"): two stages, Adam, loss
+//! weights, the feature extractor of the Gram term and the run seed. Saved as JSON next to every
+//! checkpoint so a resumed run can refuse contradicting settings by name.
 
 use std::path::PathBuf;
 

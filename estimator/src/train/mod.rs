@@ -1,5 +1,6 @@
 //! Training of the map estimator E against a frozen relightable generator (PhotoMat §3
-//! "Material map estimator", §4 "Implementation"; reference facts in DESIGN §4).
+//! "Material map estimator", §4 "Implementation"; reference facts in `docs/neural-models.md`,
+//! "Training E").
 //!
 //! - [`config`]: [`TrainConfig`] (stages, Adam, loss weights, seeds) and [`Stage`];
 //! - [`draws`]: the seeded per-step materials, lights and rolls ([`StepDraws`]);

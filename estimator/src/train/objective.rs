@@ -1,6 +1,6 @@
 //! The estimator's training objective for one batch (PhotoMat §3 "Material map estimator";
-//! DESIGN §4 "Map estimator E"): E's decoded maps are rendered under the batch's flashes and
-//! compared with the frozen M's relighting of the same neural material F:
+//! `docs/neural-models.md`, "Training E"): E's decoded maps are rendered under the batch's flashes
+//! and compared with the frozen M's relighting of the same neural material F:
 //!
 //! ```text
 //! maps   = brdf.decode(E(F))
@@ -10,10 +10,11 @@
 //! ```
 //!
 //! Images: the analytic render is display-encoded ([`encode_display`], values in [0, 1]);
-//! M's output lives in the networks' range `2·encoded − 1` (DESIGN §2). L1 compares both in
-//! that [−1, 1] range, the Gram term in [0, 1] (the extractors' input). M's image is clamped
-//! to [−1, 1]: the encoded render cannot leave [0, 1], so values beyond are unreachable
-//! targets. F and M's image are constants (G and M are frozen): only E receives gradients.
+//! M's output lives in the networks' range `2·encoded − 1` (`docs/conventions.md`, "Image values").
+//! L1 compares both in that [−1, 1] range, the Gram term in [0, 1] (the extractors' input). M's
+//! image is clamped to [−1, 1]: the encoded render cannot leave [0, 1], so values beyond are
+//! unreachable targets. F and M's image are constants (G and M are frozen): only E receives
+//! gradients.
 
 use candle_core::{DType, Tensor};
 use photomat_core::render::to_network_range;

@@ -1,6 +1,6 @@
-//! One estimator training run (PhotoMat §3 "Material map estimator", §4; DESIGN §4): E learns
-//! to decode the frozen generator's neural materials into a BRDF plugin's maps, step by step,
-//! with checkpoints that resume bit-identically.
+//! One estimator training run (PhotoMat §3 "Material map estimator", §4; `docs/neural-models.md`,
+//! "Training E"): E learns to decode the frozen generator's neural materials into a BRDF plugin's
+//! maps, step by step, with checkpoints that resume bit-identically.
 //!
 //! Each step draws its batch from the run seed and the step index ([`StepDraws`]): materials
 //! (z and noise of G_ema per material seed, [`GanModel::features_for_seeds`]), one flash per

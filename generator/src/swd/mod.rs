@@ -1,7 +1,7 @@
 //! Sliced Wasserstein distance (SWD) between two sets of RGB images, on Laplacian-pyramid
 //! patches: the GAN quality metric of ProGAN (Karras et al. 2018, "Progressive Growing of GANs
 //! for Improved Quality, Stability, and Variation", appendix D), following the reference code
-//! `metrics/sliced_wasserstein.py` of `tkarras/progressive_growing_of_gans`. PhotoMat's issue 6
+//! `metrics/sliced_wasserstein.py` of `tkarras/progressive_growing_of_gans`. photomat
 //! uses it between relit samples of G/M and real flash crops, because it needs no downloaded
 //! feature network (FID would).
 //!

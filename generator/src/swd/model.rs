@@ -1,5 +1,5 @@
 //! The SWD of a GAN model against a data set: the quantity `photomat eval-gan` prints and
-//! the trainer logs (issue 6, item 5), so that both measure the same thing.
+//! the trainer logs, so that both measure the same thing.
 //!
 //! `count` fakes are relit samples of G and M: each from its own seed (latent and noise,
 //! [`GanModel::features_for_seeds`], ψ = 1, i.e. no truncation), under a light drawn from the

@@ -1,6 +1,6 @@
 //! StyleGAN2's path-length regularisation of G (Karras et al. 2020 §3.2; StyleGAN2-ADA
-//! `loss.py`, phase `Greg`), optional in PhotoMat's reference configuration (DESIGN §4: weight
-//! 2 every 4 steps).
+//! `loss.py`, phase `Greg`), optional in PhotoMat's reference configuration
+//! (`docs/neural-models.md`, "GAN training": weight 2 every 4 steps).
 //!
 //! For a half batch (`pl_batch_shrink` = 2) of generated images x = M(G(ws), ω) and an image
 //! of noise y ~ N(0, I)/√(H·W), the Jacobian-vector product `g = ∂(x·y)/∂ws` gives per sample

@@ -59,7 +59,7 @@ pub struct ParamMeta {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Class {
-    /// The issue's tolerances apply.
+    /// The strict tolerances of golden/README.md ("Tolerances") apply.
     Strict,
     /// float32 cannot resolve the reference to 1e-5: finiteness plus the looser bounds below.
     IllConditioned,
@@ -222,7 +222,7 @@ pub struct Tolerances {
     pub noise_factor: f64,
 }
 
-/// Our f64 evaluation against the float32 references: the issue's tolerances.
+/// Our f64 evaluation against the float32 references: golden/README.md's tolerances.
 pub const F64: Tolerances = Tolerances {
     value: 1e-5,
     albedo: 1e-5,
@@ -236,7 +236,7 @@ pub const F64: Tolerances = Tolerances {
 /// measured worst f32 errors are 1.2e-6 (values) and 1.5e-6 (gradients), extremes included.
 pub const F32: Tolerances = F64;
 
-/// The worst error seen per kind, for the note the issue asks for.
+/// The worst error seen per kind, for the measured-worst note (golden/README.md).
 #[derive(Debug, Default, Clone)]
 pub struct Worst {
     pub err: f64,
@@ -434,7 +434,7 @@ pub fn compare_brdf(golden: &BrdfGolden, ours: &Evaluation, tol: &Tolerances) ->
     report
 }
 
-/// Load a BRDF golden file and check its shape against the issue: ≥ 256 random cases, tagged
+/// Load a BRDF golden file and check its shape: ≥ 256 random cases, tagged
 /// extremes, float32 references from the pinned Mitsuba, our model's parameter list.
 pub fn load_brdf(stem: &str, model: &dyn DifferentiableBrdf) -> BrdfGolden {
     let golden: BrdfGolden = load(stem);
