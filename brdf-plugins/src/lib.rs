@@ -4,17 +4,15 @@
 //! layout): [`lambert`], [`ggx`], [`coated`] and the [`height`] adapter. Each file's header
 //! holds the model's parameter table; each file declares its plugin once with
 //! `photomat_core::register_brdf!`, and the maps several models share come from
-//! [`photomat_core::param::common`]. Adding a built-in is one new file here (plus its `mod`
-//! line below): the names, the tests' model list and the conformance checks follow from the
-//! registry.
+//! [`photomat_core::param::common`]. Adding a built-in is one new file here and nothing else:
+//! `build.rs` declares every file of `src/` as a module, and the names, the tests' model list
+//! and the conformance checks follow from the registry.
 //!
 //! Linking: a crate that only lists this one in Cargo.toml sees none of its plugins; name it
 //! in code with `use photomat_brdfs as _;`.
 
-pub mod coated;
-pub mod ggx;
-pub mod height;
-pub mod lambert;
+// `pub mod coated; pub mod ggx; …`: one module per file of `src/`, written by `build.rs`.
+include!(concat!(env!("OUT_DIR"), "/plugins.rs"));
 
 use photomat_core::{Result, registrations_from};
 
@@ -53,7 +51,7 @@ mod tests {
 
     #[test]
     fn builtins_are_exactly_the_plugin_files() {
-        // Catches a file without a registration (or without its `mod` line) and a
+        // Catches a file without a registration and a
         // registration whose name is not its file's stem.
         let names = builtin_names().unwrap();
         assert!(!names.is_empty(), "no built-in is linked into the tests");
