@@ -203,10 +203,10 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         c.generator.channel_multiplier,
         c.batch,
         c.seed,
-        if c.generator.tileable {
-            ", tileable"
-        } else {
-            ""
+        match (&c.generator.spatial, c.generator.tileable) {
+            (Some(_), _) => ", spatial: any-size, on patches at the photos' resolution",
+            (None, true) => ", tileable",
+            (None, false) => "",
         },
         c.data.display(),
         data.dataset().len(),
