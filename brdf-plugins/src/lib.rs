@@ -35,39 +35,23 @@ pub fn builtin_configurations() -> Result<Vec<String>> {
 mod tests {
     use super::*;
 
-    /// The plugin files: every `src/*.rs` but the crate root.
-    fn plugin_file_stems() -> Vec<String> {
-        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-        let mut stems: Vec<String> = std::fs::read_dir(&dir)
-            .unwrap()
-            .map(|e| e.unwrap().path())
-            .filter(|p| p.extension().is_some_and(|x| x == "rs"))
-            .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
-            .filter(|stem| stem != "lib")
-            .collect();
-        stems.sort();
-        stems
-    }
-
     #[test]
     fn builtins_are_exactly_the_plugin_files() {
         // Catches a file without a registration and a
         // registration whose name is not its file's stem.
         let names = builtin_names().unwrap();
         assert!(!names.is_empty(), "no built-in is linked into the tests");
-        assert_eq!(names, plugin_file_stems());
+        let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+        assert_eq!(
+            names,
+            photomat_core::testing::plugin_file_stems(&dir).unwrap()
+        );
     }
 
     #[test]
     fn builtins_file_stem_equals_registered_name() {
+        photomat_core::testing::check_file_stems(module_path!()).unwrap();
         for r in registrations_from(module_path!()).unwrap() {
-            assert_eq!(
-                r.file_stem(),
-                Some(r.name),
-                "{} registered in {}",
-                r.name,
-                r.file
-            );
             assert_eq!(
                 r.module.rsplit("::").next(),
                 Some(r.name),

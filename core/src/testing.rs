@@ -108,6 +108,43 @@ pub fn configurations(crates: &[&str]) -> Result<Vec<String>> {
     Ok(out)
 }
 
+/// Stems of the plugin files in the source folder `dir`: every `*.rs` file but the crate root
+/// `lib.rs`, sorted. One file per model and file stem = registered name make this the list a
+/// plugin crate's registrations must equal.
+pub fn plugin_file_stems(dir: &Path) -> Result<Vec<String>> {
+    let entries = std::fs::read_dir(dir)
+        .map_err(|e| Error::Invalid(format!("cannot list '{}': {e}", dir.display())))?;
+    let mut stems = Vec::new();
+    for entry in entries {
+        let path = entry
+            .map_err(|e| Error::Invalid(format!("cannot list '{}': {e}", dir.display())))?
+            .path();
+        if path.extension().is_some_and(|x| x == "rs") {
+            if let Some(stem) = path.file_stem().and_then(|s| s.to_str()) {
+                if stem != "lib" {
+                    stems.push(stem.to_string());
+                }
+            }
+        }
+    }
+    stems.sort();
+    Ok(stems)
+}
+
+/// Checks that every plugin the crate `crate_name` registers (as `module_path!()` spells it)
+/// was declared in a file whose stem is its registered name.
+pub fn check_file_stems(crate_name: &str) -> Result<()> {
+    for r in crate::registrations_from(crate_name)? {
+        ensure!(
+            r.file_stem() == Some(r.name),
+            "'{}' is registered in {}: the file stem must be the registered name",
+            r.name,
+            r.file
+        );
+    }
+    Ok(())
+}
+
 // ---------------------------------------------------------------------------------------
 // Random cases
 // ---------------------------------------------------------------------------------------

@@ -22,15 +22,7 @@ pub mod cli_fixtures;
 /// that the list does not depend on what the linker kept.
 pub fn expected_builtins() -> Vec<String> {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../brdf-plugins/src");
-    let mut stems: Vec<String> = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|x| x == "rs"))
-        .map(|p| p.file_stem().unwrap().to_string_lossy().into_owned())
-        .filter(|stem| stem != "lib")
-        .collect();
-    stems.sort();
-    stems
+    photomat_core::testing::plugin_file_stems(&dir).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// Every model configuration the property tests run on: each built-in model and each
