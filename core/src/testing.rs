@@ -119,12 +119,11 @@ pub fn plugin_file_stems(dir: &Path) -> Result<Vec<String>> {
         let path = entry
             .map_err(|e| Error::Invalid(format!("cannot list '{}': {e}", dir.display())))?
             .path();
-        if path.extension().is_some_and(|x| x == "rs") {
-            if let Some(stem) = path.file_stem().and_then(|s| s.to_str()) {
-                if stem != "lib" {
-                    stems.push(stem.to_string());
-                }
-            }
+        let stem = path.file_stem().and_then(|s| s.to_str());
+        if let Some(stem) = stem.filter(|_| path.extension().is_some_and(|x| x == "rs"))
+            && stem != "lib"
+        {
+            stems.push(stem.to_string());
         }
     }
     stems.sort();
