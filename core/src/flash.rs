@@ -13,6 +13,11 @@ use crate::{Error, Result};
 
 /// Side length of the material square, in world units.
 pub const PLANE_SIDE: f64 = 1.0;
+
+/// Side of the material square a whole prepared flash photo spans, in world units (camera and
+/// flash at height 1; its H×H training crops of the 2H×2H photo are unit squares, and a
+/// spatial generator's texel is `PHOTO_SIDE / S` for S×S photos; `docs/datasets.md`).
+pub const PHOTO_SIDE: f64 = 2.0;
 /// Height of the collocated camera and flash above the plane.
 pub const FLASH_HEIGHT: f64 = 1.0;
 /// Flash intensity: π, so that a flat white Lambertian texel straight under the flash

@@ -249,6 +249,16 @@ impl GeneratorConfig {
         self.resolution / BASE_RESOLUTION
     }
 
+    /// World units per texel of F (flash at height 1): 1/R for the fixed-size G (its R×R
+    /// output is the unit square), the training photos' texel for a spatial G; `None` for a
+    /// spatial G saved before the texel size was recorded.
+    pub fn texel_size(&self) -> Option<f64> {
+        match &self.spatial {
+            None => Some(photomat_core::flash::PLANE_SIDE / self.resolution as f64),
+            Some(spatial) => spatial.texel_size,
+        }
+    }
+
     /// The number of base cells per side of an F of side `size`: `size / cell_size` for a
     /// spatial G and a positive multiple of the cell size, 4 for the fixed-size G at
     /// `size = resolution`; otherwise an error saying which sizes are possible.

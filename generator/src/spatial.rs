@@ -39,6 +39,12 @@ pub struct SpatialConfig {
     /// 1×1 layers from a local latent to the base channels (`lrelu` between them, the last
     /// one linear). Default 2.
     pub layers: usize,
+    /// World units per texel of F: the texel of the photos the patches were cut from (2/S for
+    /// S×S prepared photos, the flash at height 1; docs/conventions.md, "Training patches").
+    /// A sample of N texels covers a square of side N · texel_size. Set from the training data
+    /// when a run starts (`RunPlan::bind_data`); `None` in a model folder written before.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texel_size: Option<f64>,
 }
 
 impl Default for SpatialConfig {
@@ -46,6 +52,7 @@ impl Default for SpatialConfig {
         Self {
             local_dim: 32,
             layers: 2,
+            texel_size: None,
         }
     }
 }
@@ -58,6 +65,11 @@ impl SpatialConfig {
         }
         if self.layers == 0 {
             bail!("spatial.layers must be at least 1");
+        }
+        if let Some(t) = self.texel_size
+            && !(t.is_finite() && t > 0.0)
+        {
+            bail!("spatial.texel_size must be a positive number of world units, got {t}");
         }
         Ok(())
     }

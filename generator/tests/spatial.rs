@@ -27,6 +27,8 @@ fn spatial_config() -> GeneratorConfig {
         spatial: Some(SpatialConfig {
             local_dim: 4,
             layers: 2,
+            // 16² patches of 64² photos: 2/64 world units per texel.
+            texel_size: Some(2.0 / 64.0),
         }),
         ..Default::default()
     }

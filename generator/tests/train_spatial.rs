@@ -64,6 +64,7 @@ fn tiny_spatial_config(data: &Path) -> TrainConfig {
         spatial: Some(SpatialConfig {
             local_dim: 4,
             layers: 2,
+            ..SpatialConfig::default()
         }),
         ..Default::default()
     };

@@ -177,3 +177,82 @@ fn relight_bad_inputs_are_clear_errors() {
     }
     assert!(!out.exists(), "no output after a failure");
 }
+
+/// A tiny untrained spatial GAN (R = 32, cells of 8 texels) whose texels are those of 64²
+/// photos (2/64 world units), saved in `dir/name`.
+fn tiny_spatial_gan(dir: &Path, name: &str, texel_size: Option<f64>) -> std::path::PathBuf {
+    use candle_core::Device;
+    use photomat_generator::{GanModel, SpatialConfig};
+    let config = photomat_generator::GeneratorConfig {
+        tileable: true,
+        spatial: Some(SpatialConfig {
+            local_dim: 4,
+            texel_size,
+            ..SpatialConfig::default()
+        }),
+        ..photomat_tests::cli_fixtures::tiny_gan_config(32)
+    };
+    let path = dir.join(name);
+    GanModel::new(&config, 5, &Device::Cpu)
+        .unwrap()
+        .save(&path, serde_json::json!({ "test": true }))
+        .unwrap();
+    path
+}
+
+#[test]
+fn relight_spatial_model_at_any_multiple_of_its_cell() {
+    let dir = tempfile::tempdir().unwrap();
+    let gan = tiny_spatial_gan(dir.path(), "spatial", Some(2.0 / 64.0));
+    // Default: the training photos' side, 2 / (2/64) = 64 texels.
+    let out = dir.path().join("native.png");
+    relight(&gan, "1", "1", &out, &[]);
+    let (sheet, _) = read_png(&out).unwrap();
+    assert_eq!((sheet.height, sheet.width), (64, 64));
+    // Any multiple of the 8-texel cell, e.g. 40 (not a power of two).
+    let out = dir.path().join("forty.png");
+    relight(&gan, "1", "2", &out, &["--size", "40"]);
+    let (sheet, _) = read_png(&out).unwrap();
+    assert_eq!(sheet.height, 40);
+    // 44 is not a multiple of the cell: the error names the cell size.
+    let err = photomat_error(&[
+        "relight",
+        "--gan",
+        path_str(&gan),
+        "--size",
+        "44",
+        "--out",
+        path_str(&dir.path().join("bad.png")),
+    ]);
+    assert!(err.contains("44") && err.contains('8'), "{err}");
+}
+
+#[test]
+fn relight_spatial_model_without_texel_size_says_how_to_record_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let gan = tiny_spatial_gan(dir.path(), "old", None);
+    let err = photomat_error(&[
+        "relight",
+        "--gan",
+        path_str(&gan),
+        "--out",
+        path_str(&dir.path().join("x.png")),
+    ]);
+    assert!(err.contains("texel_size"), "{err}");
+}
+
+#[test]
+fn relight_fixed_size_model_refuses_another_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let gan = tiny_gan(dir.path(), "fixed", SIDE, 2);
+    let err = photomat_error(&[
+        "relight",
+        "--gan",
+        path_str(&gan),
+        "--size",
+        "64",
+        "--out",
+        path_str(&dir.path().join("x.png")),
+    ]);
+    assert!(err.contains("64"), "{err}");
+}

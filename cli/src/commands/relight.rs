@@ -16,15 +16,16 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
-use candle_core::{Device, Tensor};
+use candle_core::{DType, Device, Tensor};
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
+use photomat_core::flash::PHOTO_SIDE;
 use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::lights::DEFAULT_ORBIT_RADIUS;
 use photomat_core::sheet::contact_sheet;
 use photomat_core::{FlashGeometry, Highlight};
-use photomat_generator::GanModel;
 use photomat_generator::train::samples::display_tiles;
+use photomat_generator::{GanModel, GeneratorConfig};
 
 use crate::common::{orbit_lights, progress_bar};
 
@@ -33,6 +34,9 @@ const MAX_ORBIT: u32 = 1024;
 /// Lights relit per forward pass of M: bounds memory (N copies of F at 1024² would not fit)
 /// without giving up the batched matrix products.
 const RELIGHT_BATCH: usize = 8;
+
+/// Largest `--size`: a 4096² material's 32 feature channels alone take 2 GiB in f32.
+const MAX_SIDE: u32 = 4096;
 /// NeuQuant sampling factor of the GIF palettes (1 best … 30 fastest): 1 lets every pixel
 /// train the palette, which halves the colour error on small frames (32²: 3/255 against
 /// 7/255 at the crate's suggested 10) for a cost that stays small next to G.
@@ -72,6 +76,14 @@ pub struct Args {
     )]
     pub psi: f64,
 
+    /// Side of the material in texels [default: the model's native output: R for a
+    /// fixed-size model, the training photos' size for a spatial one]. A spatial model
+    /// makes any multiple of R/4 (a larger side shows more of the material at the same
+    /// texel scale); a fixed-size model only R.
+    #[arg(long, value_name = "N",
+          value_parser = clap::value_parser!(u32).range(1..=MAX_SIDE as i64))]
+    pub size: Option<u32>,
+
     /// Contact sheet of all positions (PNG).
     #[arg(long, value_name = "FILE.png")]
     pub out: PathBuf,
@@ -103,18 +115,25 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let device = Device::Cpu;
     let model = GanModel::load(&args.gan, &device)
         .with_context(|| format!("cannot load the GAN model in '{}'", args.gan.display()))?;
-    let side = model.config().resolution;
+    let (side, world_side) = material_side(model.config(), args.size)?;
+    // The orbit is given on the unit material square; scale it to the material's extent.
+    let highlights: Vec<Highlight> = highlights
+        .iter()
+        .map(|h| Highlight::new(h.x * world_side, h.y * world_side))
+        .collect();
 
     let bar = progress_bar(
         highlights.len() as u64,
         "{elapsed_precise} [{bar:40}] {pos}/{len} lights ({eta} left)",
     );
     let features = model
-        .features_for_seeds(&[args.seed], args.psi)
+        .features_for_seeds_at(&[args.seed], args.psi, side)
         .context("cannot generate the material")?;
     let mut tiles = Vec::with_capacity(highlights.len());
-    for lights in highlights.chunks(RELIGHT_BATCH) {
-        tiles.extend(relight(&model, &features, lights, side)?);
+    // M's intermediates grow with lights × texels: RELIGHT_BATCH lights up to 512², fewer above.
+    let per_call = (RELIGHT_BATCH * 512 * 512 / (side * side)).clamp(1, RELIGHT_BATCH);
+    for lights in highlights.chunks(per_call) {
+        tiles.extend(relight(&model, &features, lights, side, world_side)?);
         bar.inc(lights.len() as u64);
     }
     bar.finish_and_clear();
@@ -163,18 +182,44 @@ fn write_extras(args: &Args, tiles: &[PlanarImage], out: &mut dyn Write) -> anyh
     Ok(())
 }
 
-/// The material `features` (1, C, R, R) relit under each of `lights`, as display tiles.
+/// The texel side N of the material to relight (`--size`, or the model's native output) and
+/// the world side it covers (1 for the fixed-size G; N · texel size for a spatial one).
+fn material_side(config: &GeneratorConfig, size: Option<u32>) -> anyhow::Result<(usize, f64)> {
+    let Some(texel) = config.texel_size() else {
+        bail!(
+            "this spatial model does not record its texel size (gan.json: \
+             architecture.spatial.texel_size); resume its training once with the current \
+             photomat to record it"
+        );
+    };
+    let native = if config.spatial.is_some() {
+        // The training photos' side in texels, as a multiple of the cell.
+        let photo = (PHOTO_SIDE / texel).round() as usize;
+        photo.div_ceil(config.cell_size()).max(1) * config.cell_size()
+    } else {
+        config.resolution
+    };
+    let side = size.map_or(native, |s| s as usize);
+    config.cells_for(side)?;
+    Ok((side, side as f64 * texel))
+}
+
+/// The material `features` (1, C, N, N) relit under each of `lights` (world coordinates of
+/// the highlight relative to the material's centre) on a square of side `world_side`, as
+/// display tiles.
 fn relight(
     model: &GanModel,
     features: &Tensor,
     lights: &[Highlight],
     side: usize,
+    world_side: f64,
 ) -> anyhow::Result<Vec<PlanarImage>> {
     let (_, c, h, w) = features.dims4()?;
     let batch = features
         .broadcast_as((lights.len(), c, h, w))?
         .contiguous()?;
-    let omega = FlashGeometry::omega_for(lights, side, model.device())?;
+    let omega =
+        FlashGeometry::with_side(lights, side, world_side, DType::F32, model.device())?.omega;
     let images = model
         .relight()
         .forward(&batch, &omega)

@@ -179,13 +179,14 @@ impl Args {
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let plan = GanTraining::plan(&args.out, &args.settings(), args.resume)?;
+    let mut plan = GanTraining::plan(&args.out, &args.settings(), args.resume)?;
     for note in &plan.notes {
         eprintln!("{note}");
     }
     let total = args.length()?.steps(plan.config.batch)?;
     let data =
         DatasetSource::for_training(&plan.config).context("cannot open the training data")?;
+    plan.bind_data(&data)?;
     let cadence = Cadence {
         checkpoint_every: args.checkpoint_every,
         sample_every: args.sample_every,

@@ -32,9 +32,7 @@ use photomat_core::{Error, Highlight, Result};
 pub use paper::PaperDetector;
 pub use robust::RobustDetector;
 
-/// Side of the material square a whole flash photo spans, in engine units (camera and flash at
-/// height 1; its H×H training crops of the 2H×2H photo are unit squares, `docs/datasets.md`).
-pub const PHOTO_SIDE: f64 = 2.0;
+pub use photomat_core::flash::PHOTO_SIDE;
 
 /// Whether a detector trusted its result.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]

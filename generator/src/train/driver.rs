@@ -233,6 +233,29 @@ pub struct RunPlan {
     pub notes: Vec<String>,
 }
 
+impl RunPlan {
+    /// Records what the training data fixes in the model: a spatial G's texel size in world
+    /// units (the data's sample side over R). A run that already has one must get data of the
+    /// same texel: photos prepared at another size would change what the model's texels mean.
+    pub fn bind_data(&mut self, data: &dyn TrainingData) -> anyhow::Result<()> {
+        let resolution = self.config.generator.resolution as f64;
+        let Some(spatial) = self.config.generator.spatial.as_mut() else {
+            return Ok(());
+        };
+        let texel = data.sample_side() / resolution;
+        match spatial.texel_size {
+            None => spatial.texel_size = Some(texel),
+            // Equal up to f64 rounding of the same ratio computed twice.
+            Some(saved) if (saved - texel).abs() <= 1e-12 * saved => {}
+            Some(saved) => bail!(
+                "the run's texels are {saved} world units but this data set's are {texel}: \
+                 prepare the photos at the size the run started with"
+            ),
+        }
+        Ok(())
+    }
+}
+
 /// What [`GanTraining::run`] reports while it works.
 #[derive(Debug)]
 pub enum GanEvent<'a> {
@@ -601,6 +624,53 @@ fn checkpoint(trainer: &Trainer, run: &Path) -> anyhow::Result<()> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::train::data::{FlashPlacement, RealBatch};
+
+    /// Training data that only knows its sample side.
+    struct Side(f64);
+
+    impl TrainingData for Side {
+        fn reals(&self, _: usize, _: u64, _: &Device) -> candle_core::Result<RealBatch> {
+            candle_core::bail!("no reals")
+        }
+        fn fake_lights(&self, _: usize, _: u64) -> candle_core::Result<Vec<FlashPlacement>> {
+            candle_core::bail!("no lights")
+        }
+        fn sample_side(&self) -> f64 {
+            self.0
+        }
+    }
+
+    #[test]
+    fn bind_data_records_the_spatial_texel_and_refuses_another() {
+        let generator = GeneratorConfig {
+            resolution: 64,
+            tileable: true,
+            spatial: Some(SpatialConfig::default()),
+            ..GeneratorConfig::default()
+        };
+        let mut plan = RunPlan {
+            config: TrainConfig::new(generator, PathBuf::from("d"), 4, 1),
+            resume: false,
+            notes: Vec::new(),
+        };
+        // 64² patches of 512² photos cover 2·64/512 = 0.25 world units: texels of 1/256.
+        plan.bind_data(&Side(0.25)).unwrap();
+        let texel = plan.config.generator.texel_size();
+        assert_eq!(texel, Some(1.0 / 256.0));
+        plan.bind_data(&Side(0.25)).unwrap();
+        // Photos prepared at 256² instead: texels twice as large.
+        let err = plan.bind_data(&Side(0.5)).unwrap_err().to_string();
+        assert!(err.contains("prepare the photos at the size"), "{err}");
+        // A fixed-size G keeps its unit square whatever the data says: 1/R at R = 256.
+        let mut fixed = RunPlan {
+            config: TrainConfig::new(GeneratorConfig::default(), PathBuf::from("d"), 4, 1),
+            resume: false,
+            notes: Vec::new(),
+        };
+        fixed.bind_data(&Side(0.25)).unwrap();
+        assert_eq!(fixed.config.generator.texel_size(), Some(1.0 / 256.0));
+    }
 
     #[test]
     fn kimg_rounds_up_to_whole_steps() {
