@@ -67,10 +67,19 @@ pub fn save_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()
 pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()> {
     let saved = read_config(dir)?;
     // Where the data set lives is not part of the trained state: a moved data set resumes.
-    let relocated = TrainConfig {
+    let mut relocated = TrainConfig {
         data: config.data.clone(),
         ..saved
     };
+    // A spatial run saved before texel sizes were recorded takes the one its data gives
+    // (`RunPlan::bind_data` checks it against the data set).
+    if let (Some(saved), Some(requested)) = (
+        relocated.generator.spatial.as_mut(),
+        config.generator.spatial.as_ref(),
+    ) && saved.texel_size.is_none()
+    {
+        saved.texel_size = requested.texel_size;
+    }
     let diffs = config_differences(&relocated, config);
     if !diffs.is_empty() {
         candle_core::bail!(
@@ -81,4 +90,42 @@ pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()
     }
     let path: PathBuf = dir.join(STATE_FILE);
     photomat_core::checkpoint::load_vars_checked(state, &path).map_err(candle_core::Error::wrap)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{GeneratorConfig, SpatialConfig};
+
+    fn spatial(texel_size: Option<f64>, local_dim: usize) -> TrainConfig {
+        let generator = GeneratorConfig {
+            resolution: 32,
+            tileable: true,
+            spatial: Some(SpatialConfig {
+                local_dim,
+                texel_size,
+                ..SpatialConfig::default()
+            }),
+            ..GeneratorConfig::default()
+        };
+        TrainConfig::new(generator, PathBuf::from("data"), 4, 1)
+    }
+
+    #[test]
+    fn a_run_saved_without_texel_size_resumes_with_the_datas() {
+        let dir = tempfile::tempdir().unwrap();
+        save_state(dir.path(), &VarMap::new(), &spatial(None, 8)).unwrap();
+        load_state(dir.path(), &VarMap::new(), &spatial(Some(1.0 / 256.0), 8)).unwrap();
+        // Any other difference is still refused.
+        let err = load_state(dir.path(), &VarMap::new(), &spatial(Some(1.0 / 256.0), 16))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("local_dim"), "{err}");
+        // And a recorded texel size must match.
+        save_state(dir.path(), &VarMap::new(), &spatial(Some(1.0 / 128.0), 8)).unwrap();
+        let err = load_state(dir.path(), &VarMap::new(), &spatial(Some(1.0 / 256.0), 8))
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("texel_size"), "{err}");
+    }
 }
