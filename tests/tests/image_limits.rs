@@ -114,3 +114,43 @@ fn prepare_indexes_the_good_photo_next_to_a_huge_header() {
     let reason = rejected[0]["reason"].as_str().unwrap();
     assert!(reason.contains(&MAX_PIXELS.to_string()), "{reason}");
 }
+
+#[test]
+fn a_small_jpeg_claiming_65000_squared_is_rejected_by_prepare() {
+    let dir = tempfile::tempdir().unwrap();
+    let (photos, data) = (dir.path().join("photos"), dir.path().join("data"));
+    std::fs::create_dir(&photos).unwrap();
+    // A real 64² JPEG whose SOF0 header is patched to claim 65000×65000.
+    let mut jpeg = Vec::new();
+    image::RgbImage::from_pixel(64, 64, image::Rgb([120, 90, 60]))
+        .write_to(
+            &mut std::io::Cursor::new(&mut jpeg),
+            image::ImageFormat::Jpeg,
+        )
+        .unwrap();
+    let sof = jpeg
+        .windows(2)
+        .position(|w| w == [0xFF, 0xC0])
+        .expect("a baseline JPEG has SOF0");
+    jpeg[sof + 5..sof + 9].copy_from_slice(&[0xFD, 0xE8, 0xFD, 0xE8]);
+    std::fs::write(photos.join("bomb.jpg"), &jpeg).unwrap();
+    photomat(&[
+        "prepare",
+        "--photos",
+        path_str(&photos),
+        "--out",
+        path_str(&data),
+        "--size",
+        "32",
+    ])
+    .unwrap();
+    let index: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(data.join("index.json")).unwrap()).unwrap();
+    let rejected = index["rejected"].as_array().unwrap();
+    assert_eq!(rejected.len(), 1, "{index}");
+    let reason = rejected[0]["reason"].as_str().unwrap();
+    assert!(
+        reason.contains("65000×65000") && reason.contains(&MAX_PIXELS.to_string()),
+        "{reason}"
+    );
+}
