@@ -1,8 +1,8 @@
-//! What several commands share and no library owns: the progress-bar style, the Ctrl-C stop
-//! flag of the training commands, argument parsers used by more than one command, the
-//! orbit lights of `--orbit N --radius R`, and the shortest decimal form of f32 constants.
+//! What several commands share and no library owns: the progress-bar style, the stop flag
+//! of the training commands (SIGINT, SIGTERM, SIGHUP) and their exit status, argument
+//! parsers used by more than one command, the orbit lights of `--orbit N --radius R`, and the shortest decimal form of f32 constants.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use std::sync::{Arc, OnceLock};
 
 use anyhow::Context;
@@ -29,28 +29,147 @@ pub fn steps_bar(total: u64, start: u64) -> ProgressBar {
     bar
 }
 
-/// Set by the Ctrl-C handler; the training loops stop after the current step.
+/// Set by the signal handler; the training loops stop after the current step.
 static STOP: OnceLock<Arc<AtomicBool>> = OnceLock::new();
 
-/// The stop flag, cleared, installing the Ctrl-C handler on first use (once per process).
+/// The number of the first SIGINT, SIGTERM or SIGHUP since [`stop_flag`] was last called (0:
+/// none), so the command exits with 128 + that number, as a shell reports a process killed
+/// by it.
+static SIGNAL: AtomicI32 = AtomicI32::new(0);
+
+/// SIGINT (Ctrl-C) on platforms without Unix signals.
+const SIGINT: i32 = 2;
+
+/// The stop flag, cleared, installing the handler of SIGINT, SIGTERM and SIGHUP (Ctrl-C only
+/// off Unix) on first use, once per process: a scheduler's, container's or `timeout`'s stop
+/// checkpoints like Ctrl-C. A second signal while the step finishes exits at once with
+/// 128 + its number: checkpoints are written atomically, so the last one stays intact.
 pub fn stop_flag() -> anyhow::Result<Arc<AtomicBool>> {
+    SIGNAL.store(0, Ordering::SeqCst);
     if let Some(flag) = STOP.get() {
         flag.store(false, Ordering::SeqCst);
         return Ok(flag.clone());
     }
-    let flag = Arc::new(AtomicBool::new(false));
-    let handler_flag = flag.clone();
-    ctrlc::set_handler(move || {
-        // A second Ctrl-C while the step finishes exits at once: checkpoints are written
-        // atomically, so the last one stays intact (130 = 128 + SIGINT, the shell's code).
-        if handler_flag.swap(true, Ordering::SeqCst) {
-            eprintln!("\ninterrupted twice: exiting without saving the current step");
-            std::process::exit(130);
+    let flag = STOP
+        .get_or_init(|| Arc::new(AtomicBool::new(false)))
+        .clone();
+    install_handler()?;
+    Ok(flag)
+}
+
+/// The `--help` note of the training commands on signals and exit status.
+pub const STOP_HELP: &str = "Ctrl-C (SIGINT), SIGTERM and SIGHUP finish the current step, save the state and print \
+the resume command; the exit status is then 130 (SIGINT) or 143 (SIGTERM; 129 SIGHUP), 128 + the \
+signal number. A second signal exits at once, keeping the last checkpoint.";
+
+/// The interruption of a training command whose stop flag was set: the signal that set it.
+pub fn interruption() -> Interrupted {
+    match SIGNAL.load(Ordering::SeqCst) {
+        0 => Interrupted { signal: SIGINT },
+        signal => Interrupted { signal },
+    }
+}
+
+/// A training run stopped by a signal after checkpointing; `photomat_cli::run` exits with
+/// [`Interrupted::exit_code`] (130 after SIGINT, 143 after SIGTERM, 129 after SIGHUP), so
+/// `train-gan … && train-estimator …` does not go on with a half-trained model.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Interrupted {
+    /// The signal number (2 SIGINT, 15 SIGTERM, 1 SIGHUP).
+    pub signal: i32,
+}
+
+impl Interrupted {
+    /// 128 + the signal number, the shell's code for a process ended by that signal.
+    pub fn exit_code(&self) -> u8 {
+        (128 + self.signal).clamp(0, 255) as u8
+    }
+
+    fn name(&self) -> String {
+        match self.signal {
+            1 => "SIGHUP".into(),
+            2 => "SIGINT".into(),
+            15 => "SIGTERM".into(),
+            n => format!("signal {n}"),
         }
+    }
+}
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "stopped by {} after saving the state (exit status {})",
+            self.name(),
+            self.exit_code()
+        )
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
+/// Unix: SIGINT, SIGTERM and SIGHUP through `sigaction`, the handler recording which one
+/// arrived (the `ctrlc` crate's handler is not told). It only touches atomics and calls
+/// `write(2)` and `_exit(2)`, both async-signal-safe (POSIX.1-2017 §2.4.3).
+#[cfg(unix)]
+fn install_handler() -> anyhow::Result<()> {
+    extern "C" fn on_signal(signal: libc::c_int) {
+        let Some(flag) = STOP.get() else { return };
+        let message: &[u8] = if flag.swap(true, Ordering::SeqCst) {
+            let text: &[u8] = b"\ninterrupted twice: exiting without saving the current step\n";
+            // SAFETY: write(2) and _exit(2) are async-signal-safe; `text` is a static buffer.
+            unsafe {
+                libc::write(2, text.as_ptr().cast(), text.len());
+                libc::_exit(128 + signal);
+            }
+        } else {
+            let _ = SIGNAL.compare_exchange(0, signal, Ordering::SeqCst, Ordering::SeqCst);
+            match signal {
+                libc::SIGINT => {
+                    b"\nCtrl-C: finishing the current step, then saving (Ctrl-C again to quit now)\n"
+                }
+                libc::SIGTERM => {
+                    b"\nSIGTERM: finishing the current step, then saving (again to quit now)\n"
+                }
+                _ => b"\nSIGHUP: finishing the current step, then saving (again to quit now)\n",
+            }
+        };
+        // SAFETY: as above.
+        unsafe {
+            libc::write(2, message.as_ptr().cast(), message.len());
+        }
+    }
+    for signal in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+        // SAFETY: a zeroed sigaction is valid (empty mask, no flags); the handler is an
+        // `extern "C" fn(c_int)`, what `sa_sigaction` holds without SA_SIGINFO.
+        let failed = unsafe {
+            let mut action: libc::sigaction = std::mem::zeroed();
+            action.sa_sigaction = on_signal as extern "C" fn(libc::c_int) as libc::sighandler_t;
+            action.sa_flags = libc::SA_RESTART;
+            libc::sigemptyset(&mut action.sa_mask);
+            libc::sigaction(signal, &action, std::ptr::null_mut()) != 0
+        };
+        if failed {
+            return Err(std::io::Error::last_os_error())
+                .with_context(|| format!("cannot install the handler of signal {signal}"));
+        }
+    }
+    Ok(())
+}
+
+/// Elsewhere: Ctrl-C through the `ctrlc` crate.
+#[cfg(not(unix))]
+fn install_handler() -> anyhow::Result<()> {
+    ctrlc::set_handler(|| {
+        let Some(flag) = STOP.get() else { return };
+        if flag.swap(true, Ordering::SeqCst) {
+            eprintln!("\ninterrupted twice: exiting without saving the current step");
+            std::process::exit(128 + SIGINT);
+        }
+        let _ = SIGNAL.compare_exchange(0, SIGINT, Ordering::SeqCst, Ordering::SeqCst);
         eprintln!("\nCtrl-C: finishing the current step, then saving (Ctrl-C again to quit now)");
     })
-    .context("cannot install the Ctrl-C handler")?;
-    Ok(STOP.get_or_init(|| flag).clone())
+    .context("cannot install the Ctrl-C handler")
 }
 
 /// `--detector NAME` of `prepare` and `eval-detector`.

@@ -108,7 +108,8 @@ impl Command {
 
 /// Run the command line of this process: parse `std::env::args_os()`, execute, print errors
 /// as `error: …` followed by their causes to stderr. Exit codes: 0 success, 1 failure,
-/// 2 usage error.
+/// 2 usage error, 128 + the signal number for a training stopped by SIGINT (130), SIGTERM
+/// (143) or SIGHUP (129) after its checkpoint.
 pub fn run() -> ExitCode {
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
@@ -123,6 +124,12 @@ pub fn run() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         // `photomat brdfs | head`: the reader has gone, nothing is left to report.
         Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
+        Err(e) if e.downcast_ref::<common::Interrupted>().is_some() => {
+            let stop = e.downcast_ref::<common::Interrupted>().copied();
+            let stop = stop.expect("checked by the guard");
+            eprintln!("{stop}");
+            ExitCode::from(stop.exit_code())
+        }
         Err(e) => {
             eprintln!("{}", format_error(&e));
             ExitCode::FAILURE
@@ -139,8 +146,8 @@ fn is_broken_pipe(error: &anyhow::Error) -> bool {
 }
 
 /// Parse `args` (the first item is the program name, as in `std::env::args`) and execute,
-/// writing the command's output to stdout. For tests and embedding; usage errors and `--help`
-/// come back as errors.
+/// writing the command's output to stdout. For tests and embedding; usage errors, `--help`
+/// and a training stopped by a signal (after its checkpoint) come back as errors.
 pub fn run_with_args<I, T>(args: I) -> anyhow::Result<()>
 where
     I: IntoIterator<Item = T>,

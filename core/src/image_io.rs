@@ -16,6 +16,10 @@
 //! destination's folder and are renamed over the destination, so a reader never sees a
 //! half-written file and an interrupted write leaves the previous file intact. Every error
 //! names the file and the problem.
+//!
+//! Every reader checks the size in the file's header against [`MAX_PIXELS`] before it
+//! allocates pixels, and decodes under [`decode_limits`]: a few-kilobyte file whose header
+//! claims 65000×65000 is an error naming the file and the limit, not a 24 GB allocation.
 
 use std::fs::{self, File};
 use std::io::{Cursor, Write};
@@ -26,6 +30,33 @@ use candle_core::{DType, Device, Tensor};
 use image::{DynamicImage, ImageBuffer, ImageDecoder, ImageFormat, ImageReader};
 
 use crate::{Error, Result};
+
+/// Most pixels (width × height) a photo or map file may have: 100 megapixels, four times a
+/// 50 MP phone photo, and as 16-bit RGBA still only 800 MB to decode (`docs/datasets.md`).
+pub const MAX_PIXELS: u64 = 100_000_000;
+
+/// Refuse a `width`×`height` header over [`MAX_PIXELS`], with the reason as text.
+pub fn check_pixel_limit(width: u64, height: u64) -> std::result::Result<(), String> {
+    let pixels = width.saturating_mul(height);
+    if pixels > MAX_PIXELS {
+        return Err(format!(
+            "too large: the header claims {width}×{height} = {pixels} pixels, over photomat's \
+             limit of {MAX_PIXELS} ({} megapixels, photomat_core::image_io::MAX_PIXELS)",
+            MAX_PIXELS / 1_000_000
+        ));
+    }
+    Ok(())
+}
+
+/// The `image` crate's decoding limits matching [`MAX_PIXELS`]: no side beyond it, and no
+/// decoder buffer beyond that many 16-bit RGBA pixels (8 bytes each).
+pub fn decode_limits() -> image::Limits {
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(MAX_PIXELS as u32);
+    limits.max_image_height = Some(MAX_PIXELS as u32);
+    limits.max_alloc = Some(MAX_PIXELS * 8);
+    limits
+}
 
 /// The sheet layouts, re-exported under their former path.
 pub use crate::sheet::{CONTACT_SHEET_GAP, contact_sheet, contact_sheet_grid};
@@ -267,8 +298,14 @@ fn png_channels(color: image::ColorType) -> std::result::Result<(usize, PngBits)
 /// Grey → 1 channel, grey+alpha → 2, RGB → 3, RGBA → 4; palette images expand to RGB(A).
 pub fn read_png(path: &Path) -> Result<(PlanarImage, PngBits)> {
     let bytes = fs::read(path).map_err(|e| Error::file(path, format!("cannot read: {e}")))?;
-    let decoded = image::load_from_memory_with_format(&bytes, ImageFormat::Png)
-        .map_err(|e| Error::file(path, format!("not a readable PNG: {e}")))?;
+    let mut reader = ImageReader::new(Cursor::new(&bytes));
+    reader.set_format(ImageFormat::Png);
+    reader.limits(decode_limits());
+    let not_png = |e: image::ImageError| Error::file(path, format!("not a readable PNG: {e}"));
+    let decoder = reader.into_decoder().map_err(not_png)?;
+    let (w, h) = decoder.dimensions();
+    check_pixel_limit(w as u64, h as u64).map_err(|e| Error::file(path, e))?;
+    let decoded = DynamicImage::from_decoder(decoder).map_err(not_png)?;
     let (channels, bits) = png_channels(decoded.color()).map_err(|e| Error::file(path, e))?;
     let (width, height) = (decoded.width() as usize, decoded.height() as usize);
     // 8-bit samples widen exactly (v·257), so v16/65535 = v8/255.
@@ -350,6 +387,13 @@ pub fn write_exr(path: &Path, image: &PlanarImage) -> Result<()> {
 /// (module table). Samples of any type are converted to f32; values are not checked.
 pub fn read_exr(path: &Path) -> Result<PlanarImage> {
     use exr::prelude::{ReadChannels, ReadLayers, read};
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| Error::file(path, format!("not a readable EXR: {e}")))?;
+    for header in &meta.headers {
+        let size = header.layer_size;
+        check_pixel_limit(size.width() as u64, size.height() as u64)
+            .map_err(|e| Error::file(path, e))?;
+    }
     let image = read()
         .no_deep_data()
         .largest_resolution_level()

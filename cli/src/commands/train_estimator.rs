@@ -3,7 +3,7 @@
 //! [--panel-every K] [--checkpoint-every K] [--resume]`: trains the map estimator E for the
 //! BRDF model SPEC against the frozen G_ema + M of a GAN model folder (PhotoMat §3 "Material
 //! map estimator"). The run is the library's `photomat_estimator::train::EstimatorTraining`
-//! driver; this command parses the flags, installs the Ctrl-C handler and shows progress.
+//! driver; this command parses the flags, installs the signal handler and shows progress.
 //!
 //! SPEC is any registered model, including plugins linked into a custom binary built on
 //! `photomat_cli::run()`. Stage 1 (`--steps`) compares the analytic render of E's maps with
@@ -17,7 +17,8 @@
 //! `estimator.safetensors` (E, BRDF by name) next to a copy of RUN's `gan.json` +
 //! `gan.safetensors`, so `photomat sample --model RUN_E` loads both. It also holds
 //! `train.json` + `train_state.safetensors` (written atomically every `--checkpoint-every`
-//! steps, at the end and on Ctrl-C after the current step), `log.csv` (one row per step) and
+//! steps, at the end and on SIGINT/SIGTERM/SIGHUP after the current step, then exiting with
+//! 128 + the signal number), `log.csv` (one row per step) and
 //! `panels/step-NNNNNN.png` (per material: M's relighting | the analytic render | the maps).
 //! `--resume` continues from the last checkpoint bit-identically; flags that contradict
 //! `train.json` are errors naming the field.
@@ -28,9 +29,10 @@ use std::path::{Path, PathBuf};
 use candle_core::Device;
 use photomat_estimator::train::{Cadence, EstimatorOutcome, EstimatorSettings, EstimatorTraining};
 
-use crate::common::{steps_bar, stop_flag};
+use crate::common::{interruption, steps_bar, stop_flag};
 
 #[derive(Debug, clap::Args)]
+#[command(after_help = crate::common::STOP_HELP)]
 pub struct Args {
     /// GAN model folder (`photomat train-gan` output: gan.json + gan.safetensors). Taken from
     /// RUN_E/train.json with --resume.
@@ -173,7 +175,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         ));
     })?;
     bar.finish_and_clear();
-    report(run, total, &outcome, out)
+    report(run, total, &outcome, out)?;
+    if outcome.interrupted {
+        return Err(interruption().into());
+    }
+    Ok(())
 }
 
 /// The lines after a run: how it ended and where its outputs are.

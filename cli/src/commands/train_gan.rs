@@ -4,12 +4,13 @@
 //! relightable generator G, the relighting MLP M and the light-conditioned discriminator D on
 //! a prepared flash-photo data set (PhotoMat §3–4). The run is the library's
 //! `photomat_generator::train::GanTraining` driver; this command parses the flags, opens the
-//! data set, installs the Ctrl-C handler and shows progress.
+//! data set, installs the signal handler and shows progress.
 //!
 //! The run folder RUN holds:
 //! - `train.json` (the full configuration) and `train_state.safetensors` (G, G_ema, M, D,
 //!   Adam moments, counters): written atomically every `--checkpoint-every` steps, at the
-//!   end, and when Ctrl-C is pressed (the current step finishes first);
+//!   end, and on SIGINT (Ctrl-C), SIGTERM or SIGHUP (the current step finishes first; the
+//!   command then exits with 128 + the signal number: 130, 143, 129);
 //! - `gan.json` + `gan.safetensors`: the inference model (G_ema + M) with its provenance,
 //!   written with every checkpoint, so RUN is a GAN model folder for `photomat relight --gan
 //!   RUN` and `photomat train-estimator --gan RUN`;
@@ -36,10 +37,11 @@ use photomat_generator::train::{
     Cadence, GanEvent, GanOutcome, GanSettings, GanTraining, RunLength,
 };
 
-use crate::common::{steps_bar, stop_flag};
+use crate::common::{interruption, steps_bar, stop_flag};
 
 #[derive(Debug, clap::Args)]
 #[command(group(clap::ArgGroup::new("length").args(["steps", "kimg"]).required(true)))]
+#[command(after_help = crate::common::STOP_HELP)]
 pub struct Args {
     /// Prepared data set folder (`photomat prepare` output); its photos must be at least
     /// twice the model size. Taken from RUN/train.json with --resume.
@@ -216,7 +218,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let bar = steps_bar(total, start_step);
     let outcome = training.run(&data, &stop, &mut |event| show(&bar, event))?;
     bar.finish_and_clear();
-    report(&args.out, total, &outcome, out)
+    report(&args.out, total, &outcome, out)?;
+    if outcome.interrupted {
+        return Err(interruption().into());
+    }
+    Ok(())
 }
 
 /// One event of the run on the progress bar.

@@ -15,7 +15,7 @@ use std::io::Cursor;
 use image::imageops::FilterType;
 use image::metadata::Orientation;
 use image::{DynamicImage, ImageDecoder, ImageFormat, ImageReader, Rgb32FImage};
-use photomat_core::image_io::PlanarImage;
+use photomat_core::image_io::{self, PlanarImage};
 use photomat_core::render::DISPLAY_GAMMA;
 
 /// Why a file is not in the dataset.
@@ -108,10 +108,13 @@ pub fn prepare_photo(bytes: &[u8], framing: Framing) -> Result<PreparedPhoto, Re
     let name = format_name(format);
     let mut reader = ImageReader::new(Cursor::new(bytes));
     reader.set_format(format);
+    reader.limits(image_io::decode_limits());
     let mut decoder = reader
         .into_decoder()
         .or_else(|e| reject(format!("corrupt {name}: {e}")))?;
     let (w0, h0) = decoder.dimensions();
+    // The header's size before any pixel buffer: a small file may claim 65000×65000.
+    image_io::check_pixel_limit(w0 as u64, h0 as u64).map_err(Rejection)?;
     let (w0, h0) = (w0 as usize, h0 as usize);
     let min_side = framing.min_side();
     if w0.min(h0) < min_side {
