@@ -7,53 +7,19 @@
 //! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
 //! through one `Once`, so the variable is written before any test thread reads it.
 
-use std::path::{Path, PathBuf};
-use std::sync::Once;
+mod training_data;
+use training_data::{second_order, simulated_dataset};
+
+use std::path::Path;
 
 use anyhow::Result;
 // Link the built-in BRDF plugins: the simulator renders with them.
 use candle_core::Device;
 use candle_nn::VarMap;
 use photomat_brdfs as _;
-use photomat_data::dataset::{PrepareOptions, prepare};
-use photomat_data::procedural::families;
-use photomat_data::simulator::{
-    CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig, simulate,
-};
 use photomat_data::source::DatasetSource;
 use photomat_generator::GeneratorConfig;
-use photomat_generator::train::{
-    FlashPlacement, RealBatch, TrainConfig, Trainer, TrainingData, enable_second_order_gradients,
-};
-
-static ENV: Once = Once::new();
-
-fn second_order() {
-    ENV.call_once(enable_second_order_gradients);
-}
-
-/// 8 simulated photos of 64², prepared at 64 (= 2 × the 32² model).
-fn simulated_dataset(dir: &Path) -> Result<PathBuf> {
-    let (sim, data) = (dir.join("sim"), dir.join("data"));
-    let all = families();
-    let config = SimulationConfig {
-        count: 8,
-        size: 64,
-        seed: 3,
-        format: PhotoFormat::Png,
-        families: all.iter().map(|f| f.as_ref()).collect(),
-        camera: CameraSource::Phone(PhoneCamera::default()),
-        jitter: HighlightJitter::default(),
-    };
-    simulate(&sim, &config, false, &|| {})?;
-    let options = PrepareOptions {
-        size: 64,
-        progress: false,
-        ..PrepareOptions::default()
-    };
-    prepare(&sim.join("photos"), &data, &options)?;
-    Ok(data)
-}
+use photomat_generator::train::{FlashPlacement, RealBatch, TrainConfig, Trainer, TrainingData};
 
 fn tiny_config(data: &Path, tileable: bool) -> TrainConfig {
     let generator = GeneratorConfig {
@@ -100,7 +66,7 @@ fn mean(v: &[f64]) -> f64 {
 fn discriminator_learns_and_nothing_is_non_finite() -> Result<()> {
     second_order();
     let dir = tempfile::tempdir()?;
-    let data_dir = simulated_dataset(dir.path())?;
+    let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let config = tiny_config(&data_dir, false);
     let data = DatasetSource::open(&data_dir, 32)?;
     let mut trainer = Trainer::new(config, &Device::Cpu)?;
@@ -142,7 +108,7 @@ fn discriminator_learns_and_nothing_is_non_finite() -> Result<()> {
 fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
     second_order();
     let dir = tempfile::tempdir()?;
-    let data_dir = simulated_dataset(dir.path())?;
+    let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let data = DatasetSource::open(&data_dir, 32)?;
     // Tileable: the per-sample roll is part of the draws that must repeat; path-length
     // regularisation on every other step: its running mean is part of the state.
@@ -221,7 +187,7 @@ impl TrainingData for Poisoned {
 fn nan_guard_skips_poisoned_updates_and_stops_a_diverged_run() -> Result<()> {
     second_order();
     let dir = tempfile::tempdir()?;
-    let data_dir = simulated_dataset(dir.path())?;
+    let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let mut config = tiny_config(&data_dir, false);
     config.nan_limit = 3;
     let mut data = Poisoned {

@@ -5,53 +5,17 @@
 //! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
 //! through one `Once`, so the variable is written before any test thread reads it.
 
-use std::path::{Path, PathBuf};
-use std::sync::Once;
+mod training_data;
+use training_data::{second_order, simulated_dataset};
+
+use std::path::Path;
 
 use anyhow::Result;
 use candle_core::Device;
 use candle_nn::VarMap;
-// Link the built-in BRDF plugins: the simulator renders with them.
-use photomat_brdfs as _;
-use photomat_data::dataset::{PrepareOptions, prepare};
-use photomat_data::procedural::families;
-use photomat_data::simulator::{
-    CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig, simulate,
-};
 use photomat_data::source::{DatasetSource, SourceMode};
-use photomat_generator::train::{
-    TrainConfig, Trainer, TrainingData, enable_second_order_gradients,
-};
+use photomat_generator::train::{TrainConfig, Trainer, TrainingData};
 use photomat_generator::{GanModel, GeneratorConfig, SpatialConfig};
-
-static ENV: Once = Once::new();
-
-fn second_order() {
-    ENV.call_once(enable_second_order_gradients);
-}
-
-/// 6 simulated photos of 64², prepared at 64: 32² patches are half a photo's side.
-fn simulated_dataset(dir: &Path) -> Result<PathBuf> {
-    let (sim, data) = (dir.join("sim"), dir.join("data"));
-    let all = families();
-    let config = SimulationConfig {
-        count: 6,
-        size: 64,
-        seed: 5,
-        format: PhotoFormat::Png,
-        families: all.iter().map(|f| f.as_ref()).collect(),
-        camera: CameraSource::Phone(PhoneCamera::default()),
-        jitter: HighlightJitter::default(),
-    };
-    simulate(&sim, &config, false, &|| {})?;
-    let options = PrepareOptions {
-        size: 64,
-        progress: false,
-        ..PrepareOptions::default()
-    };
-    prepare(&sim.join("photos"), &data, &options)?;
-    Ok(data)
-}
 
 fn tiny_spatial_config(data: &Path) -> TrainConfig {
     let generator = GeneratorConfig {
@@ -97,7 +61,7 @@ fn snapshot(vars: &VarMap) -> Vec<(String, Vec<f64>)> {
 fn spatial_training_on_patches_is_finite_and_resumes_bit_identically() -> Result<()> {
     second_order();
     let dir = tempfile::tempdir()?;
-    let data_dir = simulated_dataset(dir.path())?;
+    let data_dir = simulated_dataset(dir.path(), 6, 5)?;
     let mut config = tiny_spatial_config(&data_dir);
     // Path-length regularisation on every other step: its running mean and the spatial
     // generation of its fakes are part of the state that must repeat.

@@ -1,0 +1,49 @@
+//! What the GAN trainer's tests (`train.rs`, `train_spatial.rs`) share: second-order
+//! gradients switched on once per test binary, and a tiny simulated data set.
+//!
+//! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
+//! through one `Once`, so the variable is written before any test thread reads it.
+
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+use anyhow::Result;
+// Link the built-in BRDF plugins: the simulator renders with them.
+use photomat_brdfs as _;
+use photomat_data::dataset::{PrepareOptions, prepare};
+use photomat_data::procedural::families;
+use photomat_data::simulator::{
+    CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig, simulate,
+};
+use photomat_generator::train::enable_second_order_gradients;
+
+static ENV: Once = Once::new();
+
+/// Second-order gradients for this test binary (before any backward pass).
+pub fn second_order() {
+    ENV.call_once(enable_second_order_gradients);
+}
+
+/// `count` simulated photos of 64² of every family (PNG, seeded), prepared at 64² in
+/// `dir/data`; returns the data set folder.
+pub fn simulated_dataset(dir: &Path, count: usize, seed: u64) -> Result<PathBuf> {
+    let (sim, data) = (dir.join("sim"), dir.join("data"));
+    let all = families();
+    let config = SimulationConfig {
+        count,
+        size: 64,
+        seed,
+        format: PhotoFormat::Png,
+        families: all.iter().map(|f| f.as_ref()).collect(),
+        camera: CameraSource::Phone(PhoneCamera::default()),
+        jitter: HighlightJitter::default(),
+    };
+    simulate(&sim, &config, false, &|| {})?;
+    let options = PrepareOptions {
+        size: 64,
+        progress: false,
+        ..PrepareOptions::default()
+    };
+    prepare(&sim.join("photos"), &data, &options)?;
+    Ok(data)
+}
