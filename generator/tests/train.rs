@@ -8,14 +8,13 @@
 //! through one `Once`, so the variable is written before any test thread reads it.
 
 mod training_data;
-use training_data::{second_order, simulated_dataset};
+use training_data::{second_order, simulated_dataset, snapshot};
 
 use std::path::Path;
 
 use anyhow::Result;
 // Link the built-in BRDF plugins: the simulator renders with them.
 use candle_core::Device;
-use candle_nn::VarMap;
 use photomat_brdfs as _;
 use photomat_data::source::DatasetSource;
 use photomat_generator::GeneratorConfig;
@@ -37,25 +36,6 @@ fn tiny_config(data: &Path, tileable: bool) -> TrainConfig {
     c.r1_interval = 2;
     c.lr = 0.01;
     c
-}
-
-/// Every state variable as raw values, by name.
-fn snapshot(vars: &VarMap) -> Vec<(String, Vec<f64>)> {
-    let data = vars.data().lock().unwrap();
-    let mut out: Vec<_> = data
-        .iter()
-        .map(|(n, v)| {
-            let values = v
-                .as_tensor()
-                .flatten_all()
-                .and_then(|t| t.to_dtype(candle_core::DType::F64))
-                .and_then(|t| t.to_vec1::<f64>())
-                .unwrap();
-            (n.clone(), values)
-        })
-        .collect();
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    out
 }
 
 fn mean(v: &[f64]) -> f64 {

@@ -6,13 +6,12 @@
 //! through one `Once`, so the variable is written before any test thread reads it.
 
 mod training_data;
-use training_data::{second_order, simulated_dataset};
+use training_data::{second_order, simulated_dataset, snapshot};
 
 use std::path::Path;
 
 use anyhow::Result;
 use candle_core::Device;
-use candle_nn::VarMap;
 use photomat_data::source::{DatasetSource, SourceMode};
 use photomat_generator::train::{TrainConfig, Trainer, TrainingData};
 use photomat_generator::{GanModel, GeneratorConfig, SpatialConfig};
@@ -36,25 +35,6 @@ fn tiny_spatial_config(data: &Path) -> TrainConfig {
     c.r1_interval = 2;
     c.lr = 0.01;
     c
-}
-
-/// Every state variable as raw values, by name.
-fn snapshot(vars: &VarMap) -> Vec<(String, Vec<f64>)> {
-    let data = vars.data().lock().unwrap();
-    let mut out: Vec<_> = data
-        .iter()
-        .map(|(n, v)| {
-            let values = v
-                .as_tensor()
-                .flatten_all()
-                .and_then(|t| t.to_dtype(candle_core::DType::F64))
-                .and_then(|t| t.to_vec1::<f64>())
-                .unwrap();
-            (n.clone(), values)
-        })
-        .collect();
-    out.sort_by(|a, b| a.0.cmp(&b.0));
-    out
 }
 
 #[test]

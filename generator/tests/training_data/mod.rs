@@ -1,5 +1,6 @@
 //! What the GAN trainer's tests (`train.rs`, `train_spatial.rs`) share: second-order
-//! gradients switched on once per test binary, and a tiny simulated data set.
+//! gradients switched on once per test binary, a tiny simulated data set, and snapshots of
+//! a run's state for bit-identity checks.
 //!
 //! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
 //! through one `Once`, so the variable is written before any test thread reads it.
@@ -8,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Once;
 
 use anyhow::Result;
+use candle_nn::VarMap;
 // Link the built-in BRDF plugins: the simulator renders with them.
 use photomat_brdfs as _;
 use photomat_data::dataset::{PrepareOptions, prepare};
@@ -46,4 +48,23 @@ pub fn simulated_dataset(dir: &Path, count: usize, seed: u64) -> Result<PathBuf>
     };
     prepare(&sim.join("photos"), &data, &options)?;
     Ok(data)
+}
+
+/// Every state variable as raw values, by name.
+pub fn snapshot(vars: &VarMap) -> Vec<(String, Vec<f64>)> {
+    let data = vars.data().lock().unwrap();
+    let mut out: Vec<_> = data
+        .iter()
+        .map(|(n, v)| {
+            let values = v
+                .as_tensor()
+                .flatten_all()
+                .and_then(|t| t.to_dtype(candle_core::DType::F64))
+                .and_then(|t| t.to_vec1::<f64>())
+                .unwrap();
+            (n.clone(), values)
+        })
+        .collect();
+    out.sort_by(|a, b| a.0.cmp(&b.0));
+    out
 }
