@@ -3,6 +3,8 @@
 //! any pixel buffer exists (a map read and `prepare`), and `prepare` still indexes the good
 //! photo next to it.
 
+use std::path::Path;
+
 use photomat_core::image_io::{MAX_PIXELS, read_png};
 use photomat_tests::cli_fixtures::{path_str, photomat};
 
@@ -41,6 +43,21 @@ fn huge_png(side: u32) -> Vec<u8> {
     png.extend(chunk(b"IDAT", &[]));
     png.extend(chunk(b"IEND", &[]));
     png
+}
+
+/// `photomat prepare --photos PHOTOS --out DATA --size 32`, then the index it wrote.
+fn prepare_index(photos: &Path, data: &Path) -> serde_json::Value {
+    photomat(&[
+        "prepare",
+        "--photos",
+        path_str(photos),
+        "--out",
+        path_str(data),
+        "--size",
+        "32",
+    ])
+    .unwrap();
+    serde_json::from_str(&std::fs::read_to_string(data.join("index.json")).unwrap()).unwrap()
 }
 
 #[test]
@@ -93,18 +110,7 @@ fn prepare_indexes_the_good_photo_next_to_a_huge_header() {
         .path();
     std::fs::copy(&good, photos.join("good.png")).unwrap();
     std::fs::write(photos.join("huge.png"), huge_png(100_000)).unwrap();
-    photomat(&[
-        "prepare",
-        "--photos",
-        path_str(&photos),
-        "--out",
-        path_str(&data),
-        "--size",
-        "32",
-    ])
-    .unwrap();
-    let index: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(data.join("index.json")).unwrap()).unwrap();
+    let index = prepare_index(&photos, &data);
     let photos = index["photos"].as_array().unwrap();
     assert_eq!(photos.len(), 1, "{index}");
     assert!(photos[0]["source"].as_str().unwrap().contains("good.png"));
@@ -134,18 +140,7 @@ fn a_small_jpeg_claiming_65000_squared_is_rejected_by_prepare() {
         .expect("a baseline JPEG has SOF0");
     jpeg[sof + 5..sof + 9].copy_from_slice(&[0xFD, 0xE8, 0xFD, 0xE8]);
     std::fs::write(photos.join("bomb.jpg"), &jpeg).unwrap();
-    photomat(&[
-        "prepare",
-        "--photos",
-        path_str(&photos),
-        "--out",
-        path_str(&data),
-        "--size",
-        "32",
-    ])
-    .unwrap();
-    let index: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(data.join("index.json")).unwrap()).unwrap();
+    let index = prepare_index(&photos, &data);
     let rejected = index["rejected"].as_array().unwrap();
     assert_eq!(rejected.len(), 1, "{index}");
     let reason = rejected[0]["reason"].as_str().unwrap();
