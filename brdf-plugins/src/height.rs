@@ -5,7 +5,9 @@
 //! value h ∈ [0, 1] stands for the surface height `scale·h` in world units, and
 //! `normal = normalize(−scale·∂h/∂x, −scale·∂h/∂y, 1)` with central differences over one texel
 //! on each side, wrapping around the edges (so a tileable height map gives a tileable normal
-//! map). Row index grows towards −y, so `∂h/∂y = (h[i−1] − h[i+1]) / (2Δ)` with Δ = 1/R.
+//! map). Row index grows towards −y, so `∂h/∂y = (h[i−1] − h[i+1]) / (2Δ)` with Δ the texel
+//! size: 1/R on the unit square, or the size the maps record (a spatial model's materials,
+//! whose texel is the same world size at every sample side; `MaterialMaps::texel_size`).
 //!
 //! Specification: `height(MODEL)` or `height(MODEL, scale=S)`; MODEL must take a `normal` map
 //! (`ggx`, `lambert`, another adapter producing one, or a user plugin).
@@ -43,12 +45,24 @@ pub struct HeightToNormal {
 }
 
 impl HeightToNormal {
-    /// Unit normals (B, 3, R, R) from heights (B, 1, R, R), wrap-around central differences.
+    /// Unit normals (B, 3, R, R) from heights (B, 1, R, R) on the unit square (texel 1/R),
+    /// wrap-around central differences.
     pub fn normals(&self, height: &Tensor) -> Result<Tensor> {
         let (_, _, rows, cols) = height.dims4()?;
-        // The square has side 1: texel spacing is 1/R, the central difference spans 2/R.
-        let gx = ((height.roll(-1, 3)? - height.roll(1, 3)?)? * (cols as f64 / 2.0))?;
-        let gy = ((height.roll(1, 2)? - height.roll(-1, 2)?)? * (rows as f64 / 2.0))?;
+        // Texel spacing 1/R: the central difference spans 2/R.
+        self.normals_scaled(height, cols as f64 / 2.0, rows as f64 / 2.0)
+    }
+
+    /// Unit normals (B, 3, R, C) from heights (B, 1, R, C) with square texels of `texel`
+    /// world units; the central difference spans 2·texel.
+    pub fn normals_with_texel(&self, height: &Tensor, texel: f64) -> Result<Tensor> {
+        self.normals_scaled(height, 0.5 / texel, 0.5 / texel)
+    }
+
+    /// Normals from the central differences multiplied by `1/(2Δx)`, `1/(2Δy)`.
+    fn normals_scaled(&self, height: &Tensor, inv_2dx: f64, inv_2dy: f64) -> Result<Tensor> {
+        let gx = ((height.roll(-1, 3)? - height.roll(1, 3)?)? * inv_2dx)?;
+        let gy = ((height.roll(1, 2)? - height.roll(-1, 2)?)? * inv_2dy)?;
         let nx = (gx * -self.scale)?;
         let ny = (gy * -self.scale)?;
         let nz = nx.ones_like()?;
@@ -65,7 +79,11 @@ impl MapAdapter for HeightToNormal {
                 maps.names().join(", ")
             ))
         })?;
-        nested.insert("normal", self.normals(&height)?);
+        let normals = match maps.texel_size() {
+            Some(t) => self.normals_with_texel(&height, t)?,
+            None => self.normals(&height)?,
+        };
+        nested.insert("normal", normals);
         Ok(nested)
     }
 }

@@ -1,6 +1,11 @@
 //! `MaterialMaps`: the named parameter maps of one batch of materials.
 //!
 //! Shapes: every map is NCHW, (B, channels, H, W), all maps of a set sharing B, H and W.
+//!
+//! A set may carry its texel size in world units (`docs/conventions.md`, "Spatial
+//! generator"): a spatial model's materials keep one texel size whatever their side N, so
+//! that what is derived across texels (the `height` adapter's normals) means the same at every
+//! N. Without one, the maps cover the unit square and a texel is 1/R wide.
 //! Maps of shape (B, C, 1, 1) are allowed where a model is evaluated on independent samples
 //! (brdf-eval, furnace tests): plugins broadcast maps against the direction tensors.
 
@@ -15,6 +20,7 @@ use crate::{Error, Result};
 #[derive(Debug, Clone, Default)]
 pub struct MaterialMaps {
     maps: BTreeMap<String, Tensor>,
+    texel_size: Option<f64>,
 }
 
 impl MaterialMaps {
@@ -27,6 +33,23 @@ impl MaterialMaps {
     pub fn with(mut self, name: impl Into<String>, map: Tensor) -> Self {
         self.insert(name, map);
         self
+    }
+
+    /// The same maps with texels of `size` world units (`None`: the unit square's 1/R).
+    pub fn with_texel_size(mut self, size: Option<f64>) -> Self {
+        self.texel_size = size;
+        self
+    }
+
+    /// World units per texel, when the set records it (module docs).
+    pub fn texel_size(&self) -> Option<f64> {
+        self.texel_size
+    }
+
+    /// World units per texel of maps R texels wide: the recorded size, else 1/R (the unit
+    /// square).
+    pub fn texel_size_or_unit(&self, size: usize) -> f64 {
+        self.texel_size.unwrap_or(1.0 / size as f64)
     }
 
     /// Insert or replace one map.
@@ -66,7 +89,7 @@ impl MaterialMaps {
 
     /// Apply `f` to every map (dtype or device conversion, detaching, narrowing a batch).
     pub fn map_tensors(&self, mut f: impl FnMut(&Tensor) -> Result<Tensor>) -> Result<Self> {
-        let mut out = Self::new();
+        let mut out = Self::new().with_texel_size(self.texel_size);
         for (name, map) in &self.maps {
             out.insert(name.clone(), f(map)?);
         }

@@ -9,6 +9,7 @@
 
 pub mod dataset;
 pub mod highlight;
+pub mod light_following;
 pub mod patch;
 pub mod procedural;
 pub mod sampler;

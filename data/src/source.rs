@@ -14,6 +14,8 @@
 use std::path::Path;
 
 use candle_core::{Device, Result, bail};
+use photomat_generator::GeneratorConfig;
+use photomat_generator::train::config::DEFAULT_HIGHLIGHT_PROB;
 use photomat_generator::train::{FlashPlacement, RealBatch, TrainConfig, TrainingData};
 
 use crate::dataset::FlashDataset;
@@ -104,6 +106,22 @@ impl DatasetSource {
                 PatchOptions {
                     size,
                     highlight_prob: p.highlight_prob,
+                },
+            ),
+        }
+    }
+
+    /// The source a model of architecture `config` is compared with (`eval-gan`): patches
+    /// of R² at the default highlight probability for a spatial G, crops of R² otherwise.
+    pub fn for_model(dir: &Path, config: &GeneratorConfig) -> Result<Self> {
+        let size = config.resolution;
+        match config.spatial {
+            None => Self::open(dir, size),
+            Some(_) => Self::open_patches(
+                dir,
+                PatchOptions {
+                    size,
+                    highlight_prob: DEFAULT_HIGHLIGHT_PROB,
                 },
             ),
         }

@@ -400,7 +400,7 @@ fn step<'a>(
             Box::new(move || {
                 let fake = s.d.forward(&s.fakes, omega)?;
                 let real = s.d.forward(&s.reals, omega)?;
-                drop(discriminator_loss(&real, &fake)?.backward()?);
+                drop(discriminator_loss(&real, &fake, None)?.backward()?);
                 Ok(())
             }),
             b,

@@ -106,6 +106,12 @@ pub struct Args {
     #[arg(long, value_name = "GAMMA")]
     pub r1_gamma: Option<f64>,
 
+    /// Weight of the discriminator's light-mismatch term: real photos shown under another
+    /// sample's flash count as fakes, so that the relighting must follow the light (0: off,
+    /// StyleGAN2's loss) [default: 1].
+    #[arg(long, value_name = "W")]
+    pub light_mismatch: Option<f64>,
+
     /// Spatial (any-size) generator: a field of local latents replaces the 4×4 constant, and
     /// the run trains on --size × --size patches cut from the photos at their prepared
     /// resolution (no shrinking), each with the photo's own flash geometry. Implies
@@ -167,6 +173,7 @@ impl Args {
             spatial: self.spatial,
             local_dim: self.local_dim.map(|v| v as usize),
             highlight_prob: self.highlight_prob,
+            light_mismatch: self.light_mismatch,
         }
     }
 

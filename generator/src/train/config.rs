@@ -72,7 +72,21 @@ pub struct TrainConfig {
     /// the `train.json` of fixed-size runs.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub patches: Option<PatchTraining>,
+    /// Weight λ of D's light-mismatch term ([`super::loss::discriminator_loss`]): real images
+    /// shown under another sample's lights count as fakes, so that D must check that the
+    /// highlight and falloff agree with ω (the matching-aware discriminator of Reed et al.
+    /// 2016, "Generative Adversarial Text to Image Synthesis", §4.1). Default
+    /// [`DEFAULT_LIGHT_MISMATCH`]; absent from older `train.json` files: 0 (the term off).
+    #[serde(default)]
+    pub light_mismatch: f64,
 }
+
+/// Default [`TrainConfig::light_mismatch`]. Without the term, D conditioned on ω by
+/// concatenation alone let M ignore the light: a 13-kimg spatial run and a 6.4-kimg fixed-size
+/// run on real photos rendered every material the same under all four preview lights
+/// (docs/benchmarks.md, "Light following"). With weight 1 a real under wrong lights weighs as
+/// much as a fake.
+pub const DEFAULT_LIGHT_MISMATCH: f64 = 1.0;
 
 /// How a spatial G trains on patches (docs/conventions.md, "Training patches").
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -130,6 +144,7 @@ impl TrainConfig {
             ema_rampup: Some(0.05),
             nan_limit: 20,
             patches: spatial.then(PatchTraining::default),
+            light_mismatch: DEFAULT_LIGHT_MISMATCH,
         }
     }
 
@@ -167,6 +182,12 @@ impl TrainConfig {
         }
         if !(self.pl_weight.is_finite() && self.pl_weight >= 0.0) {
             bail!("pl_weight {} must be finite and ≥ 0", self.pl_weight);
+        }
+        if !(self.light_mismatch.is_finite() && self.light_mismatch >= 0.0) {
+            bail!(
+                "light_mismatch {} must be finite and ≥ 0",
+                self.light_mismatch
+            );
         }
         if self.pl_weight > 0.0 && self.g_reg_interval == 0 {
             bail!("path-length regularisation (pl_weight > 0) needs g_reg_interval ≥ 1");

@@ -74,6 +74,8 @@ pub struct GanSettings {
     pub local_dim: Option<usize>,
     /// Probability that a training patch holds the photo's highlight.
     pub highlight_prob: Option<f64>,
+    /// Weight of D's light-mismatch term ([`TrainConfig::light_mismatch`]).
+    pub light_mismatch: Option<f64>,
 }
 
 /// The settings that a resume may not change: (flag, field of `train.json`, the given value,
@@ -86,7 +88,7 @@ type FixedField = (
 );
 
 /// Every setting fixed at the start of a run, with its command-line flag.
-pub const RESUME_FIXED: [FixedField; 13] = [
+pub const RESUME_FIXED: [FixedField; 14] = [
     (
         "--size",
         "generator.resolution",
@@ -173,6 +175,12 @@ pub const RESUME_FIXED: [FixedField; 13] = [
         "pl_weight",
         |s| s.pl_weight.map(|v| v.to_string()),
         |c| c.pl_weight.to_string(),
+    ),
+    (
+        "--light-mismatch",
+        "light_mismatch",
+        |s| s.light_mismatch.map(|v| v.to_string()),
+        |c| c.light_mismatch.to_string(),
     ),
 ];
 
@@ -419,6 +427,7 @@ impl GanTraining {
                 loss_d: stats.loss_d,
                 real_logit: stats.real_logit,
                 fake_logit: stats.fake_logit,
+                mismatch_logit: stats.mismatch_logit,
                 r1: stats.r1,
                 seconds,
                 swd,
@@ -546,6 +555,9 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
     }
     if let Some(w) = settings.pl_weight {
         config.pl_weight = w;
+    }
+    if let Some(weight) = settings.light_mismatch {
+        config.light_mismatch = weight;
     }
     if let Some(gamma) = settings.r1_gamma {
         config.r1_gamma = gamma;

@@ -1,7 +1,9 @@
 //! The run's `log.csv`: one row per training step, appended as the run goes (a row is on disk
 //! as soon as its step ends), so a plot of a live run or of an interrupted one is always
 //! possible. Columns: [`LOG_HEADER`]; empty cells where a value was not computed that step
-//! (R1 every 16 steps, SWD every `--swd-every` steps, path length every 4 steps when on).
+//! (R1 every 16 steps, SWD every `--swd-every` steps, path length every 4 steps when on,
+//! `light_gap` when the light-mismatch term is off). Logs of runs from before `light_gap`
+//! existed keep their ten-column rows under the longer header.
 //!
 //! Resuming at S steps drops the rows of steps after S (written after the checkpoint the run
 //! resumes from), so the log reads as one uninterrupted run.
@@ -15,7 +17,7 @@ use photomat_core::image_io::write_atomic;
 
 /// The header line.
 pub const LOG_HEADER: &str =
-    "step,kimg,loss_g,loss_d,real_logit,fake_logit,logit_gap,r1,seconds,swd,path_length";
+    "step,kimg,loss_g,loss_d,real_logit,fake_logit,logit_gap,r1,seconds,swd,path_length,light_gap";
 
 /// One row: the state after step `step` (steps done, 1-based).
 #[derive(Debug, Clone, PartialEq)]
@@ -32,6 +34,9 @@ pub struct LogRow {
     pub real_logit: f64,
     /// Mean logit on fakes.
     pub fake_logit: f64,
+    /// Mean logit on reals under mismatched lights, when the light-mismatch term is on; the
+    /// `light_gap` column is `real_logit` minus it (how much D checks the light).
+    pub mismatch_logit: Option<f64>,
     /// R1 penalty, on R1 steps.
     pub r1: Option<f64>,
     /// Wall-clock seconds of the step.
@@ -47,7 +52,7 @@ impl LogRow {
     pub fn line(&self) -> String {
         let opt = |v: Option<f64>| v.map(|v| format!("{v}")).unwrap_or_default();
         format!(
-            "{},{:.3},{},{},{},{},{},{},{:.3},{},{}",
+            "{},{:.3},{},{},{},{},{},{},{:.3},{},{},{}",
             self.step,
             self.kimg,
             self.loss_g,
@@ -58,7 +63,8 @@ impl LogRow {
             opt(self.r1),
             self.seconds,
             opt(self.swd),
-            opt(self.path_length)
+            opt(self.path_length),
+            opt(self.mismatch_logit.map(|m| self.real_logit - m))
         )
     }
 }
@@ -141,6 +147,7 @@ mod tests {
             r1: (step % 2 == 0).then_some(0.01),
             seconds: 1.5,
             swd: None,
+            mismatch_logit: None,
             path_length: None,
         }
     }

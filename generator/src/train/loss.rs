@@ -4,7 +4,10 @@
 //! reference.
 //!
 //! - G: `mean softplus(−D(G(z), ω))`;
-//! - D: `mean softplus(D(G(z), ω)) + mean softplus(−D(x, ω))`;
+//! - D: `mean softplus(D(G(z), ω)) + mean softplus(−D(x, ω)) + λ · mean softplus(D(x, ω'))`,
+//!   the last term the matching-aware discriminator of Reed et al. 2016 (§4.1): a real image
+//!   under lights ω' drawn for another sample is a fake, so D learns what the light does to
+//!   an image and M cannot ignore ω (λ = 0 gives StyleGAN2's loss exactly);
 //! - R1 (every k steps): `mean(‖∇ₓ D(x, ω)‖²) · γ/2 · k` — multiplied by the interval k so
 //!   that the penalty's average weight per step is γ/2 (lazy regularisation, StyleGAN2 §B).
 
@@ -27,12 +30,21 @@ pub fn generator_loss(fake_logits: &Tensor) -> Result<Tensor> {
     softplus(&fake_logits.neg()?)?.mean_all()
 }
 
-/// D's logistic loss from its logits on fakes and reals.
+/// D's logistic loss from its logits on fakes and reals, plus `mismatch_weight` λ times the
+/// loss of reals under mismatched lights as fakes (module docs) when those logits are given.
 ///
 /// # Shapes
-/// (B, 1), (B', 1) → scalar.
-pub fn discriminator_loss(real_logits: &Tensor, fake_logits: &Tensor) -> Result<Tensor> {
-    softplus(fake_logits)?.mean_all()? + softplus(&real_logits.neg()?)?.mean_all()?
+/// (B, 1), (B', 1), optionally (B'', 1) → scalar.
+pub fn discriminator_loss(
+    real_logits: &Tensor,
+    fake_logits: &Tensor,
+    mismatch: Option<(&Tensor, f64)>,
+) -> Result<Tensor> {
+    let loss = (softplus(fake_logits)?.mean_all()? + softplus(&real_logits.neg()?)?.mean_all()?)?;
+    match mismatch {
+        Some((logits, weight)) => loss + (softplus(logits)?.mean_all()? * weight)?,
+        None => Ok(loss),
+    }
 }
 
 /// The lazy R1 loss from the per-sample penalties of
@@ -75,7 +87,7 @@ mod tests {
         let real = Var::new(&[[1.0f64], [-0.5]], &dev).unwrap();
         let fake = Var::new(&[[0.25f64], [2.0]], &dev).unwrap();
         let sp = |v: f64| (1.0 + v.exp()).ln();
-        let d = discriminator_loss(&real, &fake).unwrap();
+        let d = discriminator_loss(&real, &fake, None).unwrap();
         let expect = (sp(0.25) + sp(2.0)) / 2.0 + (sp(-1.0) + sp(0.5)) / 2.0;
         assert!((d.to_scalar::<f64>().unwrap() - expect).abs() < 1e-12);
         // ∂/∂fake_i = σ(fake_i)/B, ∂/∂real_i = −σ(−real_i)/B.
@@ -88,6 +100,14 @@ mod tests {
 
         let g = generator_loss(&fake).unwrap().to_scalar::<f64>().unwrap();
         assert!((g - (sp(-0.25) + sp(-2.0)) / 2.0).abs() < 1e-12);
+
+        // The mismatch term adds λ · mean softplus(wrong), with gradient λ·σ(wrong_i)/B.
+        let wrong = Var::new(&[[-1.5f64], [0.75]], &dev).unwrap();
+        let dm = discriminator_loss(&real, &fake, Some((&wrong, 0.5))).unwrap();
+        let extra = 0.5 * (sp(-1.5) + sp(0.75)) / 2.0;
+        assert!((dm.to_scalar::<f64>().unwrap() - expect - extra).abs() < 1e-12);
+        let gw = values(dm.backward().unwrap().get(&wrong).unwrap());
+        assert!((gw[1] - 0.5 * sig(0.75) / 2.0).abs() < 1e-12);
 
         let r1 = Tensor::new(&[2.0f64, 4.0], &dev).unwrap();
         let l = r1_loss(&r1, 0.5, 16).unwrap().to_scalar::<f64>().unwrap();

@@ -12,7 +12,9 @@
 //!    Every `g_reg_interval` steps, when `pl_weight` > 0, a path-length step on half a batch
 //!    ([`super::path_length`]), a second Adam update of G and M.
 //! 2. **D step** — fresh latents, noise and lights, fakes without G's graph; real crops with
-//!    their ω; loss `softplus(D(fake)) + softplus(−D(real))`; Adam on D.
+//!    their ω; loss `softplus(D(fake)) + softplus(−D(real))`, plus `light_mismatch` ×
+//!    `softplus(D(real, ω_fake))` (the reals under the fakes' independently drawn lights: a
+//!    matching-aware D, [`super::loss`]); Adam on D.
 //! 3. **R1 step** every `r1_interval` steps — `mean ‖∇ₓD(x_real, ω)‖² · γ/2 · interval`; Adam
 //!    on D (a second D update that step, as in the reference).
 //! 4. **EMA** of G into G_ema ([`super::ema`]). The reference keeps an EMA of G only, so M
@@ -78,6 +80,9 @@ pub struct StepStats {
     pub real_logit: f64,
     /// Mean D logit on the fakes of D's step.
     pub fake_logit: f64,
+    /// Mean D logit on the reals under the fakes' (mismatched) lights, when the
+    /// light-mismatch term is on: `real_logit − mismatch_logit` is how much D relies on ω.
+    pub mismatch_logit: Option<f64>,
     /// Mean R1 penalty ‖∇ₓD‖² on the reals, on R1 steps.
     pub r1: Option<f64>,
     /// Mean path length of the path-length step, when it ran.
@@ -452,7 +457,19 @@ impl Trainer {
         let fakes = self.generate(Phase::D, step, b, None, data)?;
         let fake_logits = self.d.forward(&fakes.images.detach(), &fakes.omega)?;
         let real_logits = self.d.forward(&reals.images, &reals.omega)?;
-        let loss = discriminator_loss(&real_logits, &fake_logits)?;
+        // The fakes' lights were drawn independently of the reals': for the reals they are
+        // mismatched lights from the same distribution (loss module docs).
+        let weight = self.config.light_mismatch;
+        let mismatch_logits = if weight > 0.0 {
+            Some(self.d.forward(&reals.images, &fakes.omega)?)
+        } else {
+            None
+        };
+        let loss = discriminator_loss(
+            &real_logits,
+            &fake_logits,
+            mismatch_logits.as_ref().map(|l| (l, weight)),
+        )?;
         let loss_d = scalar(&loss)?;
         let grads = loss.backward()?;
         let finite = gradients_finite(&grads, self.opt_d.vars().map(|(_, v)| v))?;
@@ -496,6 +513,9 @@ impl Trainer {
             loss_d,
             real_logit: scalar(&real_logits.mean_all()?)?,
             fake_logit: scalar(&fake_logits.mean_all()?)?,
+            mismatch_logit: mismatch_logits
+                .map(|l| scalar(&l.mean_all()?))
+                .transpose()?,
             r1,
             path_length: pl,
             skipped,
