@@ -86,6 +86,31 @@ impl LightSet {
         Self { highlights }
     }
 
+    /// The same lights for a material of world side `side` instead of the unit square: every
+    /// highlight's plane coordinates times `side`, so each keeps its place relative to the
+    /// material (a spatial model's N-texel sample covers N × texel size world units).
+    pub fn scaled(&self, side: f64) -> Self {
+        Self {
+            highlights: self
+                .highlights
+                .iter()
+                .map(|h| Highlight::new(h.x * side, h.y * side))
+                .collect(),
+        }
+    }
+
+    /// The [`FlashGeometry`] of these lights, each scaled to a material of `size` texels and
+    /// world side `side` ([`Self::scaled`]); side 1 is [`Self::geometry`].
+    pub fn geometry_on(
+        &self,
+        size: usize,
+        side: f64,
+        dtype: DType,
+        device: &Device,
+    ) -> Result<FlashGeometry> {
+        FlashGeometry::with_side(self.scaled(side).highlights(), size, side, dtype, device)
+    }
+
     /// The highlights, in order.
     pub fn highlights(&self) -> &[Highlight] {
         &self.highlights

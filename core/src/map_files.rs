@@ -89,6 +89,11 @@ pub struct MapManifest {
     pub args: BTreeMap<String, f64>,
     /// Side R of the square maps, in texels.
     pub resolution: usize,
+    /// World units per texel, for maps of a spatial model (`MaterialMaps::texel_size`: the
+    /// same at every sample side, so derived normals keep their slope). Omitted for maps of
+    /// the unit square (texel 1/R).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texel_size: Option<f64>,
     /// One entry per parameter map, in the model's channel order.
     pub maps: Vec<MapEntry>,
 }
@@ -202,6 +207,7 @@ pub fn save_maps(
         args: PluginSpec::parse(&model)?.values.into_iter().collect(),
         brdf: model,
         resolution: height,
+        texel_size: maps.texel_size(),
         maps: entries,
     };
     let path = dir.join(MANIFEST_FILE);
@@ -246,7 +252,7 @@ pub fn load_maps(dir: &Path, brdf_override: Option<Brdf>) -> Result<LoadedMateri
             spec_names(brdf.params())
         )));
     }
-    let mut maps = MaterialMaps::new();
+    let mut maps = MaterialMaps::new().with_texel_size(manifest.texel_size);
     for spec in brdf.params() {
         let entry = manifest
             .maps
@@ -314,6 +320,13 @@ pub fn read_manifest(path: &Path) -> Result<MapManifest> {
         serde_json::from_str(&text).map_err(|e| bad(format!("corrupt material manifest: {e}")))?;
     if manifest.resolution == 0 {
         return Err(bad("field 'resolution' must be at least 1".into()));
+    }
+    if let Some(t) = manifest.texel_size
+        && !(t.is_finite() && t > 0.0)
+    {
+        return Err(bad(format!(
+            "field 'texel_size' must be a positive number of world units, got {t}"
+        )));
     }
     let mut names = BTreeSet::new();
     for entry in &manifest.maps {

@@ -117,6 +117,9 @@ pub const MAX_RESOLUTION: usize = 1024;
 pub const BASE_RESOLUTION: usize = 4;
 /// Channel cap of the channel table (StyleGAN2 `channel_max`).
 pub const MAX_CHANNELS: usize = 512;
+/// Default side of a spatial G's sampled materials, in texels: 512², the smallest texture size
+/// renderers commonly take for a surface filling a view (any multiple of the cell works).
+pub const DEFAULT_SPATIAL_SAMPLE_SIDE: usize = 512;
 
 /// Architecture of G, M and D. The defaults are the reference configuration (docs/conventions.md) at
 /// 256² (channel multiplier 1); CPU users shrink `channel_multiplier` and `resolution`.
@@ -257,6 +260,45 @@ impl GeneratorConfig {
             None => Some(photomat_core::flash::PLANE_SIDE / self.resolution as f64),
             Some(spatial) => spatial.texel_size,
         }
+    }
+
+    /// The side in texels of a sampled material: `size` when given (checked by
+    /// [`Self::cells_for`]), else the model's native side: R for the fixed-size G,
+    /// [`DEFAULT_SPATIAL_SAMPLE_SIDE`] rounded up to a whole number of cells for a spatial G.
+    pub fn sample_side(&self, size: Option<usize>) -> Result<usize> {
+        let side = match (size, &self.spatial) {
+            (Some(size), _) => size,
+            (None, None) => self.resolution,
+            (None, Some(_)) => {
+                DEFAULT_SPATIAL_SAMPLE_SIDE.div_ceil(self.cell_size()) * self.cell_size()
+            }
+        };
+        self.cells_for(side)?;
+        Ok(side)
+    }
+
+    /// World side of a material `size` texels wide: the unit square
+    /// ([`photomat_core::flash::PLANE_SIDE`]) for the fixed-size G, `size` × texel size for a
+    /// spatial G, whose texel keeps its world size at every side (an error for a spatial G
+    /// saved before the texel size was recorded).
+    pub fn world_side(&self, size: usize) -> Result<f64> {
+        self.cells_for(size)?;
+        match (&self.spatial, self.texel_size()) {
+            (None, _) => Ok(photomat_core::flash::PLANE_SIDE),
+            (Some(_), Some(texel)) => Ok(size as f64 * texel),
+            (Some(_), None) => bail!(
+                "this spatial model does not record its texel size (gan.json: \
+                 architecture.spatial.texel_size); resume its training once with the current \
+                 photomat to record it"
+            ),
+        }
+    }
+
+    /// The texel size a material's maps record ([`photomat_core::MaterialMaps::texel_size`]):
+    /// a spatial G's, so that derived maps (normals from heights) keep their meaning at every
+    /// side; `None` for the fixed-size G, whose maps cover the unit square.
+    pub fn map_texel_size(&self) -> Option<f64> {
+        self.spatial.as_ref().and_then(|s| s.texel_size)
     }
 
     /// The number of base cells per side of an F of side `size`: `size / cell_size` for a

@@ -465,3 +465,31 @@ fn map_files_save_rejects_what_would_not_load() {
     // Nothing was written by the failed saves.
     assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+#[test]
+fn map_folder_keeps_the_texel_size_of_a_spatial_models_maps() {
+    let brdf = model("height(ggx)");
+    let maps = unit_maps(&brdf, 3).with_texel_size(Some(1.0 / 128.0));
+    let dir = tempfile::tempdir().unwrap();
+    save_maps(dir.path(), brdf.as_ref(), &maps, &SaveOptions::default()).unwrap();
+    assert_eq!(manifest_json(dir.path())["texel_size"], 1.0 / 128.0);
+    let loaded = load_maps(dir.path(), None).unwrap();
+    assert_eq!(loaded.maps.texel_size(), Some(1.0 / 128.0));
+
+    // Unit-square maps write no texel size (older readers and manifests stay as they were).
+    let (plain, _, _) = saved("height(ggx)", &SaveOptions::default());
+    assert!(manifest_json(plain.path()).get("texel_size").is_none());
+    assert_eq!(
+        load_maps(plain.path(), None).unwrap().maps.texel_size(),
+        None
+    );
+
+    let mut manifest = manifest_json(dir.path());
+    manifest["texel_size"] = serde_json::json!(-0.5);
+    write_manifest_json(dir.path(), &manifest);
+    let err = load_maps(dir.path(), None).err().unwrap().to_string();
+    assert!(
+        err.contains("texel_size") && err.contains("material.json"),
+        "{err}"
+    );
+}

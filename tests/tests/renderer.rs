@@ -293,3 +293,47 @@ fn flash_geometry_of_a_crop_equals_the_photo_geometry_restricted_to_it() {
         );
     }
 }
+
+#[test]
+fn height_adapter_normals_keep_their_slope_at_every_side_when_the_texel_size_is_recorded() {
+    // A spatial model's N-texel material records one texel size whatever N: the same heights
+    // repeated 2×2 (a 2N-texel material of the same world texel) must give the same normals
+    // per texel, and a recorded texel of 1/R must equal the unit square's normals.
+    let brdf = model("height(ggx, scale=0.05)");
+    let size = 16;
+    let maps = random_maps(&brdf, &mut rng(11), size, 0.05, DType::F32);
+    let height = maps.get("height").unwrap().clone();
+    let adapter = HeightToNormal { scale: 0.05 };
+    let texel = 1.0 / 128.0;
+    let small = adapter.normals_with_texel(&height, texel).unwrap();
+    let large = adapter
+        .normals_with_texel(&height.repeat((1, 1, 2, 2)).unwrap(), texel)
+        .unwrap();
+    assert_eq!(
+        values(&large),
+        values(&small.repeat((1, 1, 2, 2)).unwrap()),
+        "normals of the 2×2-repeated heights are the repeated normals"
+    );
+    let unit = adapter.normals(&height).unwrap();
+    let recorded = adapter
+        .normals_with_texel(&height, 1.0 / size as f64)
+        .unwrap();
+    for (a, b) in values(&unit).iter().zip(values(&recorded)) {
+        assert!((a - b).abs() < 1e-6, "{a} vs {b}");
+    }
+    // Without a recorded texel the unit-square convention scales slopes with N: the 2N
+    // material's normals are flatter, which is what the texel size prevents.
+    let unrecorded = adapter
+        .normals(&height.repeat((1, 1, 2, 2)).unwrap())
+        .unwrap();
+    assert_ne!(
+        values(&unrecorded),
+        values(&unit.repeat((1, 1, 2, 2)).unwrap())
+    );
+
+    // Through the adapter: maps carrying the texel size get the texel-size normals.
+    let shading = brdf
+        .shading_maps(&maps.clone().with_texel_size(Some(texel)))
+        .unwrap();
+    assert_eq!(values(shading.get("normal").unwrap()), values(&small));
+}

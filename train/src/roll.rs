@@ -52,11 +52,9 @@ pub fn roll_per_sample(x: &Tensor, offsets: &[(usize, usize)]) -> Result<Tensor>
 /// # Shapes
 /// Each map (B, C, H, W) with B = `offsets.len()` → (B, C, H, W).
 pub fn roll_maps(maps: &MaterialMaps, offsets: &[(usize, usize)]) -> Result<MaterialMaps> {
-    let mut out = MaterialMaps::new();
-    for (name, map) in maps.iter() {
-        out.insert(name, roll_per_sample(map, offsets)?);
-    }
-    Ok(out)
+    // map_tensors keeps the set's texel size.
+    maps.map_tensors(|map| Ok(roll_per_sample(map, offsets)?))
+        .map_err(candle_core::Error::wrap)
 }
 
 #[cfg(test)]

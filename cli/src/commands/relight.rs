@@ -19,13 +19,12 @@ use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor};
 use image::codecs::gif::{GifEncoder, Repeat};
 use image::{Delay, Frame, RgbaImage};
-use photomat_core::flash::PHOTO_SIDE;
 use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::lights::DEFAULT_ORBIT_RADIUS;
 use photomat_core::sheet::contact_sheet;
 use photomat_core::{FlashGeometry, Highlight};
+use photomat_generator::GanModel;
 use photomat_generator::train::samples::display_tiles;
-use photomat_generator::{GanModel, GeneratorConfig};
 
 use crate::common::{orbit_lights, progress_bar};
 
@@ -77,7 +76,7 @@ pub struct Args {
     pub psi: f64,
 
     /// Side of the material in texels [default: the model's native output: R for a
-    /// fixed-size model, the training photos' size for a spatial one]. A spatial model
+    /// fixed-size model, 512 for a spatial one]. A spatial model
     /// makes any multiple of R/4 (a larger side shows more of the material at the same
     /// texel scale); a fixed-size model only R.
     #[arg(long, value_name = "N",
@@ -111,16 +110,15 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         bail!("--psi must be a finite number, got {}", args.psi);
     }
     let lights = orbit_lights(args.orbit, args.radius)?;
-    let highlights = lights.highlights();
     let device = Device::Cpu;
     let model = GanModel::load(&args.gan, &device)
         .with_context(|| format!("cannot load the GAN model in '{}'", args.gan.display()))?;
-    let (side, world_side) = material_side(model.config(), args.size)?;
+    let config = model.config();
+    let side = config.sample_side(args.size.map(|s| s as usize))?;
+    let world_side = config.world_side(side)?;
     // The orbit is given on the unit material square; scale it to the material's extent.
-    let highlights: Vec<Highlight> = highlights
-        .iter()
-        .map(|h| Highlight::new(h.x * world_side, h.y * world_side))
-        .collect();
+    let lights = lights.scaled(world_side);
+    let highlights = lights.highlights();
 
     let bar = progress_bar(
         highlights.len() as u64,
@@ -180,28 +178,6 @@ fn write_extras(args: &Args, tiles: &[PlanarImage], out: &mut dyn Write) -> anyh
         )?;
     }
     Ok(())
-}
-
-/// The texel side N of the material to relight (`--size`, or the model's native output) and
-/// the world side it covers (1 for the fixed-size G; N · texel size for a spatial one).
-fn material_side(config: &GeneratorConfig, size: Option<u32>) -> anyhow::Result<(usize, f64)> {
-    let Some(texel) = config.texel_size() else {
-        bail!(
-            "this spatial model does not record its texel size (gan.json: \
-             architecture.spatial.texel_size); resume its training once with the current \
-             photomat to record it"
-        );
-    };
-    let native = if config.spatial.is_some() {
-        // The training photos' side in texels, as a multiple of the cell.
-        let photo = (PHOTO_SIDE / texel).round() as usize;
-        photo.div_ceil(config.cell_size()).max(1) * config.cell_size()
-    } else {
-        config.resolution
-    };
-    let side = size.map_or(native, |s| s as usize);
-    config.cells_for(side)?;
-    Ok((side, side as f64 * texel))
 }
 
 /// The material `features` (1, C, N, N) relit under each of `lights` (world coordinates of

@@ -13,12 +13,14 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, bail};
+use candle_core::{DType, Device};
 use clap::ArgGroup;
+use photomat_core::flash::PLANE_SIDE;
 use photomat_core::image_io::{PlanarImage, PngBits, write_png};
 use photomat_core::lights::DEFAULT_ORBIT_RADIUS;
 use photomat_core::map_files::load_maps;
 use photomat_core::sheet::contact_sheet;
-use photomat_core::{Highlight, LightSet, lookup, render};
+use photomat_core::{Highlight, LightSet, lookup, render_with};
 
 use crate::common::orbit_lights;
 
@@ -75,13 +77,22 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let material = load_maps(&args.maps, brdf)
         .with_context(|| format!("cannot load the material in '{}'", args.maps.display()))?;
     let model = material.brdf.name();
+    let (_, size, _) = material.maps.batch_and_size()?;
+    // Maps of a spatial model record their texel size: the lights are placed relative to the
+    // material's own world extent, as `sample` rendered them.
+    let side = material
+        .maps
+        .texel_size()
+        .map_or(PLANE_SIDE, |t| t * size as f64);
     // One highlight at a time: the renderer's intermediates scale with the batch, and a
     // 1024² render is a fraction of a second.
     let tiles = highlights
         .iter()
         .map(|h| {
-            let image =
-                render(material.brdf.as_ref(), &material.maps, &[*h]).with_context(|| {
+            let geometry =
+                LightSet::single(*h).geometry_on(size, side, DType::F32, &Device::Cpu)?;
+            let image = render_with(material.brdf.as_ref(), &material.maps, &geometry)
+                .with_context(|| {
                     format!("cannot render '{model}' at highlight ({}, {})", h.x, h.y)
                 })?;
             Ok(PlanarImage::from_tensor(&image)?)

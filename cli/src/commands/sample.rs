@@ -75,8 +75,17 @@ pub struct Args {
     #[arg(long)]
     pub mtlx: bool,
 
-    /// Side in pixels of each render and preview in the PNG sheets [default: the model's
-    /// resolution]; the maps themselves keep the model's resolution.
+    /// Side of each material in texels [default: the model's native side: 512 for a spatial
+    /// model such as the bundled one, R for a fixed-size model (which makes R only)]. A
+    /// spatial model makes any multiple of its generator's cell and its estimator's stride
+    /// (32 for the bundled model) up to 4096; its texel keeps its size, so a larger side
+    /// shows more of the material, and memory grows with the side² (about 1.5 GB at 2048²).
+    #[arg(long, value_name = "N",
+          value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub size: Option<u32>,
+
+    /// Side in pixels of each render and preview in the PNG sheets [default: the material's
+    /// side]; the maps themselves keep the material's side.
     #[arg(long = "size-render", value_name = "PX",
           value_parser = clap::value_parser!(u32).range(8..=4096))]
     pub size_render: Option<u32>,
@@ -116,6 +125,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         hextile: args.hextile,
         gltf: args.gltf,
         mtlx: args.mtlx,
+        size: args.size.map(|s| s as usize),
         render_size: args.size_render.map(|s| s as usize),
     };
     let bar = progress_bar(

@@ -98,8 +98,14 @@ pub struct SampleOptions {
     pub gltf: bool,
     /// Also write `export/material.mtlx` and its textures.
     pub mtlx: bool,
-    /// Side in pixels of each render and preview in the PNG sheets (`None`: the model's
-    /// resolution); the maps keep the model's resolution.
+    /// Side of each material in texels (`None`: the model's native side,
+    /// [`photomat_generator::GeneratorConfig::sample_side`]: R for a fixed-size model, 512 for
+    /// a spatial one). A spatial model makes any multiple of its cell that is also a multiple
+    /// of the estimator's stride; its texel keeps its world size, so a larger side shows more
+    /// of the material.
+    pub size: Option<usize>,
+    /// Side in pixels of each render and preview in the PNG sheets (`None`: the material's
+    /// side); the maps keep the material's side.
     pub render_size: Option<usize>,
 }
 
@@ -113,6 +119,7 @@ impl Default for SampleOptions {
             hextile: false,
             gltf: false,
             mtlx: false,
+            size: None,
             render_size: None,
         }
     }
@@ -180,9 +187,31 @@ impl Sampler {
         &self.estimator
     }
 
-    /// The lights of the neural and analytic renders: the reference's five.
+    /// The lights of the neural and analytic renders: the reference's five, placed relative
+    /// to the material's extent (a spatial model's N-texel material covers N × texel size
+    /// world units; [`LightSet::geometry_on`]).
     pub fn lights(&self) -> LightSet {
         LightSet::reference()
+    }
+
+    /// The side in texels of the materials of a run asked for `size` (module docs): the
+    /// GAN's [`photomat_generator::GeneratorConfig::sample_side`], also checked against the
+    /// estimator's stride, with an error naming the possible sides.
+    pub fn material_side(&self, size: Option<usize>) -> anyhow::Result<usize> {
+        let config = self.gan.config();
+        let side = config.sample_side(size)?;
+        let stride = self.estimator.estimator().config().total_stride();
+        if side % stride != 0 {
+            let step = stride * config.cell_size() / gcd(stride, config.cell_size());
+            bail!(
+                "a material side of {side} texels is not possible with this model: the \
+                 estimator reads sides that are multiples of {stride} and the generator makes \
+                 multiples of {}; use a multiple of {step} (e.g. {})",
+                config.cell_size(),
+                side.div_ceil(step) * step
+            );
+        }
+        Ok(side)
     }
 
     /// Samples `options.count` materials into `out` (created), reporting to `progress`, and
@@ -212,9 +241,10 @@ impl Sampler {
         }
         let brdf = self.estimator.brdf().clone();
         let inner = brdf.innermost();
-        let resolution = config.resolution;
+        let resolution = self.material_side(options.size)?;
         let lights = self.lights();
-        let geometry = lights.geometry(resolution, DType::F32, self.gan.device())?;
+        let world_side = config.world_side(resolution)?;
+        let geometry = lights.geometry_on(resolution, world_side, DType::F32, self.gan.device())?;
         std::fs::create_dir_all(out)
             .with_context(|| format!("cannot create '{}'", out.display()))?;
         if options.hextile && !config.tileable {
@@ -234,6 +264,7 @@ impl Sampler {
             brdf: &brdf,
             inner: &inner,
             geometry: &geometry,
+            size: resolution,
             tile: options.render_size.unwrap_or(resolution),
         };
         let mut rows = Vec::new();
@@ -296,6 +327,8 @@ struct Job<'a> {
     brdf: &'a Brdf,
     inner: &'a Brdf,
     geometry: &'a FlashGeometry,
+    /// Side of each material in texels.
+    size: usize,
     /// Side of each render and preview in the sheets.
     tile: usize,
 }
@@ -319,10 +352,14 @@ impl Job<'_> {
     ) -> anyhow::Result<Material> {
         let (gan, options, brdf) = (&self.sampler.gan, self.options, self.brdf);
         let stage = Instant::now();
-        let features = gan.features_for_seeds(&[seed], options.psi)?;
+        let features = gan.features_for_seeds_at(&[seed], options.psi, self.size)?;
         timings.generate += stage.elapsed().as_secs_f64();
         let stage = Instant::now();
-        let maps = self.sampler.estimator.estimate(&features)?;
+        let maps = self
+            .sampler
+            .estimator
+            .estimate(&features)?
+            .with_texel_size(gan.config().map_texel_size());
         timings.estimate += stage.elapsed().as_secs_f64();
         let (neural, analytic) = self.renders(&features, &maps, timings)?;
         let l1: Vec<f64> = (analytic.clone() - &neural)?
@@ -458,6 +495,11 @@ impl Job<'_> {
         let neural = Tensor::cat(&neural, 0)?.affine(0.5, 0.5)?.clamp(0.0, 1.0)?;
         Ok((neural, Tensor::cat(&analytic, 0)?))
     }
+}
+
+/// Greatest common divisor (Euclid).
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 { a } else { gcd(b, a % b) }
 }
 
 /// The display-encoded render of `maps` under the centred flash, resized to `side`.

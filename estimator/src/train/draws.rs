@@ -6,8 +6,13 @@
 //!
 //! Lights are [`LightSet::uniform`]: the highlight `(lx, ly) ~ U(−½, ½)²` in plane coordinates
 //! ([`photomat_core::Highlight`]), the distribution the GAN's fakes use
-//! (`docs/conventions.md`).
+//! (`docs/conventions.md`). For a spatial GAN, whose R×R materials are patches of side
+//! R × texel size inside photos of side 2, [`StepDraws::highlights_on`] places them as its
+//! training placed its patches' flashes: every other item's highlight inside the patch
+//! (the drawn values × the patch side), the others anywhere over a photo (× 2), so that E
+//! sees the specular peak and the photo's wide range of incidence angles alike.
 
+use photomat_core::flash::PHOTO_SIDE;
 use photomat_core::rng::SplitMix64;
 use photomat_core::{Highlight, LightSet};
 
@@ -27,6 +32,24 @@ pub struct StepDraws {
 }
 
 impl StepDraws {
+    /// The highlights in world units for materials of world side `patch_side` (module docs):
+    /// as drawn for the unit square (`None`), else item i's scaled by `patch_side` for even
+    /// i and by [`PHOTO_SIDE`] for odd i.
+    pub fn highlights_on(&self, patch_side: Option<f64>) -> Vec<Highlight> {
+        match patch_side {
+            None => self.highlights.clone(),
+            Some(side) => self
+                .highlights
+                .iter()
+                .enumerate()
+                .map(|(i, h)| {
+                    let scale = if i % 2 == 0 { side } else { PHOTO_SIDE };
+                    Highlight::new(h.x * scale, h.y * scale)
+                })
+                .collect(),
+        }
+    }
+
     /// The draws of step `step` of the run seeded `seed`, for `batch` materials of side
     /// `resolution`.
     pub fn new(seed: u64, step: u64, batch: usize, resolution: usize) -> Self {
@@ -63,6 +86,17 @@ mod tests {
         for h in &d.highlights {
             let (x, y) = (rng.next_unit() - 0.5, rng.next_unit() - 0.5);
             assert_eq!(*h, Highlight::new(x, y));
+        }
+    }
+
+    #[test]
+    fn spatial_highlights_alternate_between_the_patch_and_the_photo() {
+        let d = StepDraws::new(5, 2, 4, 64);
+        assert_eq!(d.highlights_on(None), d.highlights);
+        let placed = d.highlights_on(Some(0.5));
+        for (i, (p, h)) in placed.iter().zip(&d.highlights).enumerate() {
+            let scale = if i % 2 == 0 { 0.5 } else { PHOTO_SIDE };
+            assert_eq!(*p, Highlight::new(h.x * scale, h.y * scale));
         }
     }
 

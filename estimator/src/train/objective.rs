@@ -46,6 +46,11 @@ pub struct Objective<'a> {
     pub relight: &'a Relight,
     pub extractor: &'a dyn FeatureExtractor,
     pub config: &'a TrainConfig,
+    /// World side of the R×R training materials: 1 (the unit square) for a fixed-size GAN,
+    /// R × texel size for a spatial one.
+    pub side: f64,
+    /// Texel size the decoded maps record (a spatial GAN's; `None`: the unit square).
+    pub texel_size: Option<f64>,
 }
 
 impl Objective<'_> {
@@ -62,7 +67,10 @@ impl Objective<'_> {
     ) -> Result<LossTerms> {
         let features = features.detach();
         let (_, _, r, _) = features.dims4()?;
-        let maps = self.brdf.decode(&estimator.forward(&features)?)?;
+        let maps = self
+            .brdf
+            .decode(&estimator.forward(&features)?)?
+            .with_texel_size(self.texel_size);
         let (features, maps) = match stage {
             Stage::Aligned => (features, maps),
             Stage::Finetune => (
@@ -70,7 +78,8 @@ impl Objective<'_> {
                 roll_maps(&maps, &draws.rolls)?,
             ),
         };
-        let (target, render) = self.images(&features, &maps, &draws.highlights, r)?;
+        let highlights = draws.highlights_on(self.texel_size.map(|_| self.side));
+        let (target, render) = self.images(&features, &maps, &highlights, r)?;
         let l1 = match stage {
             Stage::Aligned => l1(&to_network_range(&render)?, &target)?,
             Stage::Finetune => l1_downsampled(
@@ -89,7 +98,7 @@ impl Objective<'_> {
     }
 
     /// M's image of `features` (constant, clamped to [−1, 1]) and the display-encoded render
-    /// of `maps` ([0, 1]) under `highlights`.
+    /// of `maps` ([0, 1]) under `highlights` (world units on the square of side `self.side`).
     ///
     /// # Shapes
     /// features (B, C_F, R, R), maps (B, ·, R, R) → ((B, 3, R, R), (B, 3, R, R)).
@@ -100,7 +109,13 @@ impl Objective<'_> {
         highlights: &[photomat_core::Highlight],
         resolution: usize,
     ) -> Result<(Tensor, Tensor)> {
-        let geometry = FlashGeometry::new(highlights, resolution, DType::F32, features.device())?;
+        let geometry = FlashGeometry::with_side(
+            highlights,
+            resolution,
+            self.side,
+            DType::F32,
+            features.device(),
+        )?;
         let target = self
             .relight
             .forward(features, &geometry.omega)?

@@ -98,6 +98,7 @@ impl EstimatorTrainer {
                 arch.encoder_channels.len()
             )));
         }
+        gan.config().world_side(resolution)?;
         let features = gan.config().feature_channels;
         if arch.in_channels != features {
             return Err(Error::Invalid(format!(
@@ -169,7 +170,18 @@ impl EstimatorTrainer {
             relight: self.gan.relight(),
             extractor: self.extractor.as_ref(),
             config: &self.config,
+            side: self.material_side(),
+            texel_size: self.gan.config().map_texel_size(),
         }
+    }
+
+    /// World side of the GAN's R×R materials (1 for a fixed-size GAN, R × texel size for a
+    /// spatial one; [`Self::with_extractor`] checked that it is known).
+    fn material_side(&self) -> f64 {
+        let config = self.gan.config();
+        config
+            .world_side(config.resolution)
+            .unwrap_or(photomat_core::flash::PLANE_SIDE)
     }
 
     /// True once both stages are done.
@@ -213,15 +225,21 @@ impl EstimatorTrainer {
     }
 
     /// M's relighting and the analytic render of E's maps for the material of `material_seed`
-    /// under `highlight`.
+    /// under `highlight` (plane coordinates of the unit square, scaled to the material's
+    /// world side).
     pub fn preview(&self, material_seed: u64, highlight: Highlight) -> Result<Preview> {
         let features = self
             .gan
             .features_for_seeds(&[material_seed], self.config.psi)?
             .detach();
-        let maps = self.model.estimate(&features)?;
+        let maps = self
+            .model
+            .estimate(&features)?
+            .with_texel_size(self.gan.config().map_texel_size());
         let (_, _, r, _) = features.dims4()?;
-        let (target, analytic) = self.objective().images(&features, &maps, &[highlight], r)?;
+        let side = self.material_side();
+        let light = Highlight::new(highlight.x * side, highlight.y * side);
+        let (target, analytic) = self.objective().images(&features, &maps, &[light], r)?;
         Ok(Preview {
             neural: target.affine(0.5, 0.5)?,
             analytic,
