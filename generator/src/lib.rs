@@ -150,6 +150,10 @@ pub struct GeneratorConfig {
     pub relight_layers: usize,
     /// Learning-rate multiplier of every layer of M. Default 0.01.
     pub relight_lr_multiplier: f64,
+    /// Exponents s of the Phong lobes `ω_z^s` M reads next to ω ([`relight`], "Light
+    /// input"): empty (the default, and older `gan.json` files) gives the paper's M on F ‖ ω.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub relight_lobes: Vec<f64>,
     /// Largest group of D's minibatch-stddev layer. Default 4.
     pub mbstd_group_size: usize,
     /// Feature channels of D's minibatch-stddev statistic. Default 1.
@@ -178,6 +182,7 @@ impl Default for GeneratorConfig {
             relight_hidden: 64,
             relight_layers: 8,
             relight_lr_multiplier: 0.01,
+            relight_lobes: Vec::new(),
             mbstd_group_size: 4,
             mbstd_channels: 1,
             spatial: None,
@@ -227,6 +232,13 @@ impl GeneratorConfig {
             if !(v.is_finite() && v > 0.0) {
                 bail!("{name} {v} must be positive and finite");
             }
+        }
+        if let Some(s) = self
+            .relight_lobes
+            .iter()
+            .find(|s| !(s.is_finite() && **s >= 1.0))
+        {
+            bail!("relight lobe exponent {s} must be a finite number ≥ 1");
         }
         if !(0.0..1.0).contains(&self.w_avg_beta) {
             bail!("w_avg_beta {} must be in [0, 1)", self.w_avg_beta);

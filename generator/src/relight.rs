@@ -16,6 +16,16 @@
 //! on other devices) it is the candle composition: matrix products on (B·H·W, C) rows with the
 //! activation of [`crate::activation`] (`docs/benchmarks.md` compares the two).
 //!
+//! # Light input
+//! With `relight_lobes` = [s₁ … s_L] M reads F ‖ ω ‖ ω_z^{s₁} … ω_z^{s_L}. Under the
+//! collocated flash the half vector is ω itself, so a flat texel's specular peak is a bump of
+//! width about 1/√s radians in ω around the normal: a plain MLP on ω must learn that sharp a
+//! function from inputs that vary by a few hundredths across a patch, which its spectral bias
+//! makes slow (the reason NeRF encodes positions, Mildenhall et al. 2020, §5.1). The lobes give
+//! M Blinn–Phong's basis of peaks of every width at once (exponents 4 … 1024: 0.5 to 0.03 rad),
+//! so that following the light is a linear readout from the first layer on. ω_z ∈ (0, 1]
+//! (the flash is above the plane), so every power is finite and in (0, 1].
+//!
 //! Parameter names under `vb`: `fc{i}.weight`, `fc{i}.bias`, i = 0 … 7.
 
 use candle_core::{Result, Tensor, bail};
@@ -42,7 +52,12 @@ const ACTIVATION: photomat_kernels::MlpActivation = photomat_kernels::MlpActivat
 pub struct Relight {
     layers: Vec<EqualizedLinear>,
     feature_channels: usize,
+    lobes: Vec<f64>,
 }
+
+/// Default lobe exponents of new runs ([`crate::GeneratorConfig::relight_lobes`]; module
+/// docs, "Light input"): peaks of width 0.5, 0.25, 0.125, 0.06 and 0.03 rad.
+pub const DEFAULT_RELIGHT_LOBES: [f64; 5] = [4.0, 16.0, 64.0, 256.0, 1024.0];
 
 impl Relight {
     /// Builds M of `cfg` (`feature_channels` + 3 → `relight_hidden` × (`relight_layers` − 1)
@@ -57,7 +72,7 @@ impl Relight {
         let layers = (0..n)
             .map(|i| {
                 let fan_in = if i == 0 {
-                    cfg.feature_channels + OMEGA_CHANNELS
+                    cfg.feature_channels + OMEGA_CHANNELS + cfg.relight_lobes.len()
                 } else {
                     cfg.relight_hidden
                 };
@@ -72,7 +87,30 @@ impl Relight {
         Ok(Self {
             layers,
             feature_channels: cfg.feature_channels,
+            lobes: cfg.relight_lobes.clone(),
         })
+    }
+
+    /// Channels of M's light input: ω and the lobes (module docs).
+    pub fn light_channels(&self) -> usize {
+        OMEGA_CHANNELS + self.lobes.len()
+    }
+
+    /// M's light input from ω: ω itself, or ω ‖ ω_z^{s₁} … ω_z^{s_L} (module docs).
+    ///
+    /// # Shapes
+    /// (B, 3, H, W) → (B, 3 + L, H, W).
+    pub fn light_input(&self, omega: &Tensor) -> Result<Tensor> {
+        if self.lobes.is_empty() {
+            return Ok(omega.clone());
+        }
+        // ω_z > 0 for a flash above the plane; the floor only guards powf against rounding.
+        let z = omega.narrow(1, 2, 1)?.clamp(0f32, 1f32)?;
+        let mut parts = vec![omega.clone()];
+        for &s in &self.lobes {
+            parts.push(z.powf(s)?);
+        }
+        Tensor::cat(&parts, 1)
     }
 
     /// The layers for the fused op, unless the reference composition is asked for.
@@ -86,13 +124,14 @@ impl Relight {
     /// M on rows: one texel per row.
     ///
     /// # Shapes
-    /// (N, feature_channels + 3) → (N, 3).
+    /// (N, feature_channels + light channels) → (N, 3): rows of F ‖ [`Self::light_input`].
     pub fn forward_rows(&self, rows: &Tensor) -> Result<Tensor> {
         let (_n, c) = rows.dims2()?;
-        if c != self.feature_channels + OMEGA_CHANNELS {
+        if c != self.feature_channels + self.light_channels() {
             bail!(
-                "relight: rows of {c} channels, expected {} features + {OMEGA_CHANNELS} for ω",
-                self.feature_channels
+                "relight: rows of {c} channels, expected {} features + {} for the light",
+                self.feature_channels,
+                self.light_channels()
             );
         }
         if let Some(layers) = self.fused_layers() {
@@ -130,13 +169,14 @@ impl Relight {
                 features.dims()
             );
         }
+        let light = self.light_input(omega)?;
         if let Some(layers) = self.fused_layers() {
-            return photomat_kernels::per_texel_mlp(features, omega, &layers, ACTIVATION);
+            return photomat_kernels::per_texel_mlp(features, &light, &layers, ACTIVATION);
         }
-        let rows = Tensor::cat(&[features, omega], 1)?
+        let rows = Tensor::cat(&[features, &light], 1)?
             .permute((0, 2, 3, 1))?
             .contiguous()?
-            .reshape((b * h * w, c + OMEGA_CHANNELS))?;
+            .reshape((b * h * w, c + self.light_channels()))?;
         self.forward_rows(&rows)?
             .reshape((b, h, w, RGB_CHANNELS))?
             .permute((0, 3, 1, 2))?

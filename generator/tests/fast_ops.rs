@@ -108,3 +108,50 @@ fn relight_mlp_fused_equals_plain_candle_on_odd_sizes() -> Result<()> {
     }
     Ok(())
 }
+
+#[test]
+fn relight_mlp_with_phong_lobes_reads_them_and_fused_equals_plain_candle() -> Result<()> {
+    let dev = Device::Cpu;
+    let mut cfg = config(false);
+    cfg.relight_lobes = vec![4.0, 64.0, 1024.0];
+    let c = cfg.feature_channels;
+    let vars = VarMap::new();
+    let vb = seeded_var_builder(&vars, 13, DType::F64, &dev);
+    let m = Relight::new(&cfg, vb.pp("m"))?;
+    perturb(&vars)?;
+    let highlights = [
+        photomat_core::Highlight::new(0.1, -0.2),
+        photomat_core::Highlight::new(-0.3, 0.05),
+    ];
+    let omega =
+        photomat_core::FlashGeometry::with_side(&highlights, 12, 0.5, DType::F64, &dev)?.omega;
+    // The light input is ω then ω_z^s per exponent, in order.
+    let light = m.light_input(&omega)?;
+    assert_eq!(light.dims4()?, (2, 3 + 3, 12, 12));
+    let z = omega.narrow(1, 2, 1)?;
+    for (i, s) in cfg.relight_lobes.iter().enumerate() {
+        let got = light.narrow(1, 3 + i, 1)?.flatten_all()?.to_vec1::<f64>()?;
+        let want = z.flatten_all()?.to_vec1::<f64>()?;
+        for (g, w) in got.iter().zip(&want) {
+            assert!(
+                (g - w.powf(*s)).abs() < 1e-12,
+                "lobe {s}: {g} vs {}",
+                w.powf(*s)
+            );
+        }
+    }
+    let f = seeded_uniform((2, c, 12, 12), 14, DType::F64, &dev)?;
+    let weights = seeded_uniform((2, 3, 12, 12), 15, DType::F64, &dev)?;
+    let run = || -> Result<(f64, Vec<(String, Tensor)>)> {
+        let loss = (m.forward(&f, &omega)? * &weights)?.sum_all()?;
+        value_and_grads(&loss, &vars)
+    };
+    let fast = run()?;
+    let reference = with_reference_ops(run)?;
+    assert_eq!(
+        fast.1.len(),
+        2 * cfg.relight_layers,
+        "every weight and bias"
+    );
+    compare("M with lobes", fast, reference, 1e-9)
+}

@@ -106,6 +106,13 @@ pub struct Args {
     #[arg(long, value_name = "GAMMA")]
     pub r1_gamma: Option<f64>,
 
+    /// Exponents s of the Phong lobes ω_z^s that the relighting MLP reads next to the light
+    /// direction, comma-separated, or `none` for the paper's MLP on features ‖ ω [default:
+    /// 4,16,64,256,1024: highlight peaks from 0.5 to 0.03 rad wide, which an MLP on ω alone
+    /// learns slowly].
+    #[arg(long, value_name = "S,S,…", value_parser = parse_lobes)]
+    pub relight_lobes: Option<Lobes>,
+
     /// Weight of the discriminator's light-mismatch term: real photos shown under another
     /// sample's flash count as fakes, so that the relighting must follow the light (0: off,
     /// StyleGAN2's loss) [default: 1].
@@ -155,6 +162,27 @@ pub struct Args {
     pub resume: bool,
 }
 
+/// The exponents of `--relight-lobes` (a newtype: clap reads a `Vec` as repeated values).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Lobes(pub Vec<f64>);
+
+/// `none`, or comma-separated finite exponents ≥ 1.
+fn parse_lobes(text: &str) -> Result<Lobes, String> {
+    if text.trim() == "none" {
+        return Ok(Lobes(Vec::new()));
+    }
+    text.split(',')
+        .map(|part| match part.trim().parse::<f64>() {
+            Ok(s) if s.is_finite() && s >= 1.0 => Ok(s),
+            _ => Err(format!(
+                "'{}' is not a lobe exponent (a number ≥ 1; or give `none`)",
+                part.trim()
+            )),
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map(Lobes)
+}
+
 impl Args {
     /// The run's settings as the flags give them.
     fn settings(&self) -> GanSettings {
@@ -174,6 +202,7 @@ impl Args {
             local_dim: self.local_dim.map(|v| v as usize),
             highlight_prob: self.highlight_prob,
             light_mismatch: self.light_mismatch,
+            relight_lobes: self.relight_lobes.clone().map(|l| l.0),
         }
     }
 

@@ -29,6 +29,7 @@ use super::log::{LogRow, TrainLog};
 use super::samples::sample_grid;
 use super::state::{CONFIG_FILE, STATE_FILE, read_config};
 use super::trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
+use crate::relight::DEFAULT_RELIGHT_LOBES;
 use crate::swd::{SwdConfig, SwdReport, model_swd};
 use crate::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION, SpatialConfig};
 
@@ -76,6 +77,9 @@ pub struct GanSettings {
     pub highlight_prob: Option<f64>,
     /// Weight of D's light-mismatch term ([`TrainConfig::light_mismatch`]).
     pub light_mismatch: Option<f64>,
+    /// Exponents of M's Phong-lobe light input ([`GeneratorConfig::relight_lobes`]; empty:
+    /// the paper's M on F ‖ ω). Default for new runs [`DEFAULT_RELIGHT_LOBES`].
+    pub relight_lobes: Option<Vec<f64>>,
 }
 
 /// The settings that a resume may not change: (flag, field of `train.json`, the given value,
@@ -88,7 +92,7 @@ type FixedField = (
 );
 
 /// Every setting fixed at the start of a run, with its command-line flag.
-pub const RESUME_FIXED: [FixedField; 14] = [
+pub const RESUME_FIXED: [FixedField; 15] = [
     (
         "--size",
         "generator.resolution",
@@ -177,12 +181,30 @@ pub const RESUME_FIXED: [FixedField; 14] = [
         |c| c.pl_weight.to_string(),
     ),
     (
+        "--relight-lobes",
+        "generator.relight_lobes",
+        |s| s.relight_lobes.as_ref().map(|l| lobes_text(l)),
+        |c| lobes_text(&c.generator.relight_lobes),
+    ),
+    (
         "--light-mismatch",
         "light_mismatch",
         |s| s.light_mismatch.map(|v| v.to_string()),
         |c| c.light_mismatch.to_string(),
     ),
 ];
+
+/// Lobe exponents as `--relight-lobes` spells them: comma-separated, or `none`.
+pub fn lobes_text(lobes: &[f64]) -> String {
+    if lobes.is_empty() {
+        return "none".into();
+    }
+    lobes
+        .iter()
+        .map(|s| s.to_string())
+        .collect::<Vec<_>>()
+        .join(",")
+}
 
 /// How long a run trains.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -542,6 +564,10 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
         relight_lr_multiplier: settings
             .relight_lr_multiplier
             .unwrap_or(defaults.relight_lr_multiplier),
+        relight_lobes: settings
+            .relight_lobes
+            .clone()
+            .unwrap_or_else(|| DEFAULT_RELIGHT_LOBES.to_vec()),
         ..defaults
     };
     let mut config = TrainConfig::new(
