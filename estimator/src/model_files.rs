@@ -107,7 +107,8 @@ impl EstimatorModel {
         Self::new(brdf, config, vars, device)
     }
 
-    /// Loads `dir/estimator.json` and `dir/estimator.safetensors` onto `device`.
+    /// Loads `dir/estimator.json` and `dir/estimator.safetensors` onto `device`, frozen (E over
+    /// detached weights; `vars()` keeps the loaded variables).
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let manifest = read_estimator_manifest(dir)?;
         let brdf = photomat_core::lookup(&manifest.brdf).map_err(|e| {
@@ -121,7 +122,22 @@ impl EstimatorModel {
         let model = Self::new(brdf, manifest.architecture, vars, device)
             .map_err(|e| Error::file(dir.join(ESTIMATOR_MANIFEST_FILE), e.to_string()))?;
         load_vars_checked(&model.vars, &weights)?;
-        Ok(model)
+        // Frozen, as `GanModel::load`: E over detached weights records no backward graph, so
+        // a large material's intermediates are freed layer by layer instead of living as long
+        // as the maps.
+        let frozen: std::collections::HashMap<String, Tensor> = model
+            .vars
+            .data()
+            .lock()
+            .map_err(|_| Error::Invalid("estimator weights: a thread panicked".into()))?
+            .iter()
+            .map(|(name, var)| (name.clone(), var.as_tensor().detach()))
+            .collect();
+        let estimator = Estimator::new(
+            model.estimator.config().clone(),
+            VarBuilder::from_tensors(frozen, DType::F32, device),
+        )?;
+        Ok(Self { estimator, ..model })
     }
 
     /// Writes `estimator.safetensors` then `estimator.json` into `dir` (created if missing):
