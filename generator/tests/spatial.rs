@@ -8,7 +8,7 @@ use std::path::Path;
 use anyhow::Result;
 use candle_core::{DType, Device, IndexOp, Tensor};
 use candle_nn::VarMap;
-use photomat_generator::model_files::{GAN_MANIFEST_FILE, read_gan_manifest};
+use photomat_generator::model_files::read_gan_manifest;
 use photomat_generator::synthesis::BaseInput;
 use photomat_generator::{
     GanModel, Generator, GeneratorConfig, NoiseInput, SpatialConfig, seeded_uniform,
@@ -209,15 +209,22 @@ fn spatial_model_saves_and_loads_with_its_local_input() -> Result<()> {
 }
 
 #[test]
-fn bundled_gan_json_loads_as_the_fixed_size_generator_and_saves_unchanged() -> Result<()> {
-    let demo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/demo");
-    let manifest = read_gan_manifest(&demo)?;
+fn fixed_size_gan_json_loads_as_the_fixed_size_generator_and_saves_unchanged() -> Result<()> {
+    // The manifest of the 32² fixed-size model bundled before the spatial one, as written by
+    // that release: no `spatial`, no `relight_lobes`.
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/fixed-size-32");
+    let manifest = read_gan_manifest(&fixture)?;
     assert_eq!(manifest.architecture.spatial, None);
+    assert!(manifest.architecture.relight_lobes.is_empty());
     // Re-serialised, the manifest is the file's JSON: no new field is written for it.
-    let text = std::fs::read_to_string(demo.join(GAN_MANIFEST_FILE))?;
+    let text = std::fs::read_to_string(fixture.join("gan.json"))?;
     let original: serde_json::Value = serde_json::from_str(&text)?;
     assert_eq!(serde_json::to_value(&manifest)?, original);
-    let model = GanModel::load(&demo, &Device::Cpu)?;
+    // It builds, saves and loads as the fixed-size G with its learned constant.
+    let dir = tempfile::tempdir()?;
+    GanModel::new(&manifest.architecture, 1, &Device::Cpu)?
+        .save(dir.path(), manifest.provenance.clone())?;
+    let model = GanModel::load(dir.path(), &Device::Cpu)?;
     assert!(matches!(
         model.generator().synthesis().base_input(),
         BaseInput::Constant(_)

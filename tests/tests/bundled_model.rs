@@ -1,8 +1,9 @@
 //! The bundled demo model (`models/demo/`), which the README's main command samples from:
-//! it is small enough to ship, it loads through the engine's model folders (a tileable GAN
-//! and a `height(ggx)` estimator), and `photomat sample` without `--model` writes materials
-//! whose maps load back, are exactly periodic, and whose analytic renders follow the neural
-//! relighting M much more closely than the untrained estimator's do.
+//! it is small enough to ship, it loads through the engine's model folders (a spatial GAN
+//! that records its texel size and a `height(ggx)` estimator), and `photomat sample` without
+//! `--model` writes 512² materials whose maps load back with that texel size, are exactly
+//! periodic, and whose analytic renders follow the neural relighting M much more closely than
+//! the untrained estimator's do.
 
 use std::path::{Path, PathBuf};
 
@@ -36,6 +37,10 @@ fn bundled_model_is_small_and_loads() {
 
     let gan = GanModel::load(&dir, &Device::Cpu).unwrap();
     assert!(gan.config().tileable, "the bundled generator is tileable");
+    assert!(
+        gan.config().spatial.is_some() && gan.config().map_texel_size().is_some(),
+        "the bundled generator is spatial and records its texel size"
+    );
     let estimator = EstimatorModel::load(&dir, &Device::Cpu).unwrap();
     assert!(estimator.brdf().name().starts_with("height(ggx"));
 }
@@ -47,7 +52,7 @@ fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
     let mut log = Vec::new();
     photomat_cli::run_with_output(
         [
-            "photomat", "sample", "--count", "4", "--seed", "0", "--out", out_s,
+            "photomat", "sample", "--count", "2", "--seed", "0", "--out", out_s,
         ],
         &mut log,
     )
@@ -64,9 +69,18 @@ fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
         .filter(|p| p.join("material").is_dir())
         .collect();
     folders.sort();
-    assert_eq!(folders.len(), 4);
+    assert_eq!(folders.len(), 2);
+    let texel = GanModel::load(&bundled(), &Device::Cpu)
+        .unwrap()
+        .config()
+        .map_texel_size();
     for folder in folders {
         let loaded = load_maps(&folder.join("material"), None).unwrap();
+        assert_eq!(
+            loaded.manifest.resolution,
+            photomat_generator::DEFAULT_SPATIAL_SAMPLE_SIDE
+        );
+        assert_eq!(loaded.maps.texel_size(), texel);
         // Tileable G + circular E: the first column continues the last one like any two
         // neighbouring columns do (a seam would show up as a jump well above the interior's).
         for (name, map) in loaded.maps.iter() {

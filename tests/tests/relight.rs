@@ -204,11 +204,17 @@ fn tiny_spatial_gan(dir: &Path, name: &str, texel_size: Option<f64>) -> std::pat
 fn relight_spatial_model_at_any_multiple_of_its_cell() {
     let dir = tempfile::tempdir().unwrap();
     let gan = tiny_spatial_gan(dir.path(), "spatial", Some(2.0 / 64.0));
-    // Default: the training photos' side, 2 / (2/64) = 64 texels.
+    // Default: the spatial models' 512² (a multiple of the 8-texel cell).
     let out = dir.path().join("native.png");
     relight(&gan, "1", "1", &out, &[]);
     let (sheet, _) = read_png(&out).unwrap();
-    assert_eq!((sheet.height, sheet.width), (64, 64));
+    assert_eq!(
+        (sheet.height, sheet.width),
+        (
+            photomat_generator::DEFAULT_SPATIAL_SAMPLE_SIDE,
+            photomat_generator::DEFAULT_SPATIAL_SAMPLE_SIDE
+        )
+    );
     // Any multiple of the 8-texel cell, e.g. 40 (not a power of two).
     let out = dir.path().join("forty.png");
     relight(&gan, "1", "2", &out, &["--size", "40"]);
