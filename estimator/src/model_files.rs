@@ -122,20 +122,11 @@ impl EstimatorModel {
         let model = Self::new(brdf, manifest.architecture, vars, device)
             .map_err(|e| Error::file(dir.join(ESTIMATOR_MANIFEST_FILE), e.to_string()))?;
         load_vars_checked(&model.vars, &weights)?;
-        // Frozen, as `GanModel::load`: E over detached weights records no backward graph, so
-        // a large material's intermediates are freed layer by layer instead of living as long
-        // as the maps.
-        let frozen: std::collections::HashMap<String, Tensor> = model
-            .vars
-            .data()
-            .lock()
-            .map_err(|_| Error::Invalid("estimator weights: a thread panicked".into()))?
-            .iter()
-            .map(|(name, var)| (name.clone(), var.as_tensor().detach()))
-            .collect();
+        // Frozen, as `GanModel::load`: a large material's intermediates are freed layer by
+        // layer instead of living as long as the maps.
         let estimator = Estimator::new(
             model.estimator.config().clone(),
-            VarBuilder::from_tensors(frozen, DType::F32, device),
+            photomat_train::varmap::frozen_var_builder(&model.vars, DType::F32, device),
         )?;
         Ok(Self { estimator, ..model })
     }

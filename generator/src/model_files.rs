@@ -108,25 +108,16 @@ impl GanModel {
     }
 
     /// Loads a GAN model folder (see the module docs) onto `device`, frozen: G and M are
-    /// built over detached copies of the loaded weights, so that their outputs record no
-    /// backward graph. With weights that are variables, candle keeps every intermediate of a
-    /// forward pass alive through the output's graph, and a 2048² material would hold all of
-    /// G's full-size activations at once (22 GB measured); frozen, each is freed when the next
-    /// layer has read it. `vars()` still holds the loaded variables (for `save`).
+    /// built over detached copies of the loaded weights
+    /// ([`photomat_train::varmap::frozen_var_builder`]), so that a large material's
+    /// intermediates are freed layer by layer. `vars()` still holds the loaded variables (for
+    /// `save`).
     pub fn load(dir: &Path, device: &Device) -> Result<Self> {
         let manifest = read_gan_manifest(dir)?;
         let config = &manifest.architecture;
         let model = Self::new(config, 0, device)?;
         load_checkpoint(&model.vars, dir.join(GAN_WEIGHTS_FILE))?;
-        let frozen: std::collections::HashMap<String, Tensor> = model
-            .vars
-            .data()
-            .lock()
-            .map_err(|_| candle_core::Error::msg("GAN weights: a thread panicked while loading"))?
-            .iter()
-            .map(|(name, var)| (name.clone(), var.as_tensor().detach()))
-            .collect();
-        let vb = VarBuilder::from_tensors(frozen, DType::F32, device);
+        let vb = photomat_train::varmap::frozen_var_builder(&model.vars, DType::F32, device);
         Self::from_var_builder(config, model.vars, vb, device)
     }
 

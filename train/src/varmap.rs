@@ -10,8 +10,8 @@
 use std::collections::HashMap;
 use std::sync::MutexGuard;
 
-use candle_core::Var;
-use candle_nn::VarMap;
+use candle_core::{DType, Device, Tensor, Var};
+use candle_nn::{VarBuilder, VarMap};
 
 /// The map's entries, locked. A lock poisoned by a panic elsewhere is taken over: the map is a
 /// plain name → `Var` table that no half-finished operation can leave inconsistent, so there is
@@ -20,6 +20,19 @@ pub fn lock(map: &VarMap) -> MutexGuard<'_, HashMap<String, Var>> {
     map.data()
         .lock()
         .unwrap_or_else(|poisoned| poisoned.into_inner())
+}
+
+/// A builder over detached copies of `map`'s variables (same storage, no gradient tracking),
+/// for networks that only run forward: with the weights as variables candle keeps every
+/// intermediate of a forward pass alive through the output's graph (a 2048² sample held all
+/// of G's full-size activations at once, 22.5 GB); over detached weights each is freed as soon
+/// as the next layer has read it.
+pub fn frozen_var_builder(map: &VarMap, dtype: DType, device: &Device) -> VarBuilder<'static> {
+    let frozen: HashMap<String, Tensor> = lock(map)
+        .iter()
+        .map(|(name, var)| (name.clone(), var.as_tensor().detach()))
+        .collect();
+    VarBuilder::from_tensors(frozen, dtype, device)
 }
 
 /// The variables of `map` whose names `keep` accepts, with their names, sorted by name (a
