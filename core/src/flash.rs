@@ -40,6 +40,12 @@ impl Highlight {
         Self { x, y }
     }
 
+    /// The same place on a square `factor` times as large (both coordinates × `factor`): a
+    /// position given on the unit square, put on a material of world side `factor`.
+    pub fn scaled(self, factor: f64) -> Self {
+        Self::new(self.x * factor, self.y * factor)
+    }
+
     /// From continuous pixel coordinates of an R×R image of the unit material square (pixel
     /// (i, j) spans [i, i+1)×[j, j+1)): `x = col/R − ½`, `y = ½ − row/R`.
     pub fn from_pixel(row: f64, col: f64, size: usize) -> Self {

@@ -91,11 +91,7 @@ impl LightSet {
     /// material (a spatial model's N-texel sample covers N × texel size world units).
     pub fn scaled(&self, side: f64) -> Self {
         Self {
-            highlights: self
-                .highlights
-                .iter()
-                .map(|h| Highlight::new(h.x * side, h.y * side))
-                .collect(),
+            highlights: self.highlights.iter().map(|h| h.scaled(side)).collect(),
         }
     }
 

@@ -26,10 +26,10 @@
 
 use candle_core::{DType, Tensor};
 use photomat_core::flash::FlashGeometry;
-use photomat_core::image_io::PlanarImage;
 use photomat_core::rng::SplitMix64;
 use photomat_core::{Error, Highlight, LightSet, Result};
 use photomat_generator::GanModel;
+use photomat_generator::train::samples::display_tiles;
 
 use crate::dataset::FlashDataset;
 use crate::highlight::{HighlightDetector, PHOTO_SIDE};
@@ -136,10 +136,7 @@ pub fn light_following(
     let mut centre_guess = Vec::with_capacity(count);
     // A material at a time: S² features of 32 channels for the whole batch would be large.
     for (&material, h) in seeds.iter().zip(lights.highlights()) {
-        let light = [Highlight::new(
-            h.x * photo_side / 2.0,
-            h.y * photo_side / 2.0,
-        )];
+        let light = [h.scaled(photo_side / 2.0)];
         centre_guess.push(100.0 * light[0].x.hypot(light[0].y) / photo_side);
         let features = model.features_for_seeds_at(&[material], 1.0, photo_size)?;
         let omega =
@@ -166,15 +163,13 @@ fn distances(
     side: f64,
     detector: &dyn HighlightDetector,
 ) -> Result<Vec<f64>> {
-    let display = images.affine(0.5, 0.5)?.clamp(0f32, 1f32)?;
-    let size = display.dim(3)?;
-    highlights
+    let size = images.dim(3)?;
+    display_tiles(images)?
         .iter()
-        .enumerate()
-        .map(|(i, h)| {
-            let image = PlanarImage::from_tensor(&display.get(i)?)?;
+        .zip(highlights)
+        .map(|(image, h)| {
             let (row, col) = h.to_pixel_on(size, side);
-            let detection = detector.detect(&image)?;
+            let detection = detector.detect(image)?;
             Ok(100.0 * detection.error_px(row, col) / size as f64)
         })
         .collect()

@@ -42,10 +42,7 @@ impl StepDraws {
                 .highlights
                 .iter()
                 .enumerate()
-                .map(|(i, h)| {
-                    let scale = if i % 2 == 0 { side } else { PHOTO_SIDE };
-                    Highlight::new(h.x * scale, h.y * scale)
-                })
+                .map(|(i, h)| h.scaled(if i % 2 == 0 { side } else { PHOTO_SIDE }))
                 .collect(),
         }
     }

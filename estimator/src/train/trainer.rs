@@ -238,7 +238,7 @@ impl EstimatorTrainer {
             .with_texel_size(self.gan.config().map_texel_size());
         let (_, _, r, _) = features.dims4()?;
         let side = self.material_side();
-        let light = Highlight::new(highlight.x * side, highlight.y * side);
+        let light = highlight.scaled(side);
         let (target, analytic) = self.objective().images(&features, &maps, &[light], r)?;
         Ok(Preview {
             neural: target.affine(0.5, 0.5)?,
