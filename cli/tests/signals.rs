@@ -84,6 +84,20 @@ fn sigterm_checkpoints_exits_143_and_resumes_from_the_saved_step() {
         assert!(Instant::now() < deadline, "no checkpoint after 10 minutes");
         std::thread::sleep(Duration::from_millis(100));
     }
+    // A second writer on the run folder fails at once, naming the first.
+    let second = photomat()
+        .args(["train-gan", "--out", path(&out), "--resume", "--steps", "2"])
+        .output()
+        .unwrap();
+    let second_err = String::from_utf8_lossy(&second.stderr);
+    assert!(!second.status.success(), "{second_err}");
+    assert!(
+        second_err.contains(&format!(
+            "in use by process {} (photomat train-gan)",
+            child.id()
+        )),
+        "{second_err}"
+    );
     // SAFETY: kill(2) on the child's PID, which stays its own until it is waited for below.
     assert_eq!(unsafe { libc::kill(child.id() as i32, libc::SIGTERM) }, 0);
     let output = child.wait_with_output().unwrap();
@@ -124,4 +138,8 @@ fn sigterm_checkpoints_exits_143_and_resumes_from_the_saved_step() {
         resumed.contains(&format!("trained 1 steps ({next} in total")),
         "{resumed}"
     );
+    // The printed command resumes with the run's own cadence (train.json keeps it).
+    let saved: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("train.json")).unwrap()).unwrap();
+    assert_eq!(saved["cadence"]["checkpoint_every"], 1, "{saved}");
 }

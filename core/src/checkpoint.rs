@@ -10,37 +10,32 @@
 
 use std::collections::HashMap;
 use std::path::Path;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
+use candle_core::Tensor;
 use candle_core::safetensors::MmapedSafetensors;
 use candle_nn::VarMap;
 
+use crate::image_io::write_atomic;
 use crate::{Error, Result};
 
 /// Most mismatches listed in an error (the count of all of them is given too).
 const MAX_LISTED_MISMATCHES: usize = 5;
 
-/// Saves every variable of `vars` to the safetensors file `path` atomically.
+/// Saves every variable of `vars` to the safetensors file `path` atomically. The file is
+/// serialised in memory and written by [`write_atomic`], so it gets the umask's permissions
+/// like every other output, and a killed save leaves only a `.NAME.PID-N.tmp` file that the
+/// next lock of the folder removes ([`crate::folder_lock`]).
 pub fn save_vars_atomic(vars: &VarMap, path: &Path) -> Result<()> {
-    static COUNTER: AtomicUsize = AtomicUsize::new(0);
-    let name = path
-        .file_name()
-        .ok_or_else(|| Error::file(path, "is not a file path"))?;
-    let tmp = path.with_file_name(format!(
-        ".{}.{}-{}.tmp",
-        name.to_string_lossy(),
-        std::process::id(),
-        COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = vars
-        .save(&tmp)
-        .map_err(|e| e.to_string())
-        .and_then(|()| std::fs::rename(&tmp, path).map_err(|e| e.to_string()));
-    result.map_err(|e| {
-        // Best effort: the temporary file is garbage whatever happened.
-        let _ = std::fs::remove_file(&tmp);
-        Error::file(path, format!("cannot write checkpoint: {e}"))
-    })
+    let bytes = {
+        let data = vars.data().lock().expect("VarMap lock poisoned");
+        let tensors: Vec<(&String, Tensor)> = data
+            .iter()
+            .map(|(name, var)| (name, var.as_tensor().clone()))
+            .collect();
+        safetensors::tensor::serialize(tensors, None)
+            .map_err(|e| Error::file(path, format!("cannot serialise checkpoint: {e}")))?
+    };
+    write_atomic(path, &bytes)
 }
 
 /// Loads the safetensors file `path` into the variables of `vars`, which must describe the
@@ -144,5 +139,20 @@ mod tests {
             untouched.sum_all().unwrap().to_scalar::<f32>().unwrap(),
             0.0
         );
+    }
+
+    /// Checkpoints get the permissions of any file the user creates (the umask's), not the
+    /// 0600 of a `tempfile` temporary.
+    #[cfg(unix)]
+    #[test]
+    fn checkpoint_permissions_follow_the_umask() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("w.safetensors");
+        save_vars_atomic(&vars_with((2, 3), 1.5), &path).unwrap();
+        let plain = dir.path().join("plain");
+        std::fs::write(&plain, b"x").unwrap();
+        let mode = |p: &Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        assert_eq!(mode(&path), mode(&plain));
     }
 }

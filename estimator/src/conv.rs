@@ -45,7 +45,7 @@ pub fn circular_conv2d(
     stride: usize,
     vb: VarBuilder,
 ) -> Result<CircularConv2d> {
-    if stride == 0 || kernel < stride || (kernel - stride) % 2 != 0 {
+    if stride == 0 || kernel < stride || !(kernel - stride).is_multiple_of(2) {
         bail!(
             "circular conv: kernel {kernel} with stride {stride} cannot keep the size \
              (need kernel ≥ stride ≥ 1 and kernel − stride even)"

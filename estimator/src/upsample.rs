@@ -86,7 +86,7 @@ mod tests {
 
     /// Closed-form 1-D weights: (input offset, weight) pairs of output texel `o`.
     fn taps(o: usize) -> [(isize, f64); 2] {
-        if o % 2 == 0 {
+        if o.is_multiple_of(2) {
             [(0, 0.75), (-1, 0.25)]
         } else {
             [(0, 0.75), (1, 0.25)]

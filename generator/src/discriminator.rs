@@ -174,7 +174,7 @@ impl Discriminator {
         }
         let vb = vb.pp(format!("b{BASE_RESOLUTION}"));
         let c4 = cfg.channels_at(BASE_RESOLUTION);
-        if c4 % cfg.mbstd_channels != 0 {
+        if !c4.is_multiple_of(cfg.mbstd_channels) {
             bail!(
                 "discriminator: {} minibatch-stddev channels do not divide the {c4} features at 4²",
                 cfg.mbstd_channels

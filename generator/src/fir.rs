@@ -92,7 +92,7 @@ pub fn upsample_axis(n: usize, mode: Padding) -> Result<AxisMatrix> {
 
 /// The ×2 downsampling matrix of one axis as compressed rows (see [`downsample_matrix`]).
 pub fn downsample_axis(n: usize, mode: Padding) -> Result<AxisMatrix> {
-    if n % 2 != 0 {
+    if !n.is_multiple_of(2) {
         candle_core::bail!("cannot downsample an axis of odd length {n}");
     }
     let taps = FIR_TAPS.map(|t| t / FIR_SUM);

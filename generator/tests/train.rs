@@ -2,7 +2,8 @@
 //! simulator + `prepare`): D learns to separate reals from fakes without a non-finite value,
 //! runs are deterministic under their seed, a resumed run is bit-identical to an uninterrupted
 //! one (path-length regularisation included), resuming another configuration names the
-//! field, and the NaN guard skips poisoned updates and stops a diverged run.
+//! field, and the NaN guard skips poisoned updates and stops a diverged run, whose last
+//! checkpoint stays the last good state.
 //!
 //! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
 //! through one `Once`, so the variable is written before any test thread reads it.
@@ -11,6 +12,7 @@ mod training_data;
 use training_data::{second_order, simulated_dataset, snapshot};
 
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use anyhow::Result;
 // Link the built-in BRDF plugins: the simulator renders with them.
@@ -18,7 +20,9 @@ use candle_core::Device;
 use photomat_brdfs as _;
 use photomat_data::source::DatasetSource;
 use photomat_generator::GeneratorConfig;
-use photomat_generator::train::{FlashPlacement, RealBatch, TrainConfig, Trainer, TrainingData};
+use photomat_generator::train::{
+    FlashPlacement, GanEvent, GanTraining, RealBatch, RunPlan, TrainConfig, Trainer, TrainingData,
+};
 
 fn tiny_config(data: &Path, tileable: bool) -> TrainConfig {
     let generator = GeneratorConfig {
@@ -142,13 +146,13 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
 /// [`DatasetSource`] whose real crops are all NaN while `poison` is set.
 struct Poisoned {
     inner: DatasetSource,
-    poison: bool,
+    poison: AtomicBool,
 }
 
 impl TrainingData for Poisoned {
     fn reals(&self, batch: usize, seed: u64, device: &Device) -> candle_core::Result<RealBatch> {
         let mut r = self.inner.reals(batch, seed, device)?;
-        if self.poison {
+        if self.poison.load(Ordering::SeqCst) {
             r.images = (r.images * f64::NAN)?;
         }
         Ok(r)
@@ -170,14 +174,14 @@ fn nan_guard_skips_poisoned_updates_and_stops_a_diverged_run() -> Result<()> {
     let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let mut config = tiny_config(&data_dir, false);
     config.nan_limit = 3;
-    let mut data = Poisoned {
+    let data = Poisoned {
         inner: DatasetSource::open(&data_dir, 32)?,
-        poison: false,
+        poison: AtomicBool::new(false),
     };
     let mut trainer = Trainer::new(config, &Device::Cpu)?;
     trainer.step(&data)?;
 
-    data.poison = true;
+    data.poison.store(true, Ordering::SeqCst);
     let d_before = snapshot(trainer.discriminator_vars());
     let g_before = snapshot(trainer.model().vars());
     let s = trainer.step(&data)?;
@@ -195,9 +199,9 @@ fn nan_guard_skips_poisoned_updates_and_stops_a_diverged_run() -> Result<()> {
     );
 
     // A clean step resets the streak; then three poisoned steps in a row stop the run.
-    data.poison = false;
+    data.poison.store(false, Ordering::SeqCst);
     assert!(trainer.step(&data)?.skipped.is_empty());
-    data.poison = true;
+    data.poison.store(true, Ordering::SeqCst);
     trainer.step(&data)?;
     trainer.step(&data)?;
     let err = trainer.step(&data).err().unwrap().to_string();
@@ -205,5 +209,48 @@ fn nan_guard_skips_poisoned_updates_and_stops_a_diverged_run() -> Result<()> {
         err.contains("step 6") && err.contains("D loss is NaN") && err.contains("3 consecutive"),
         "{err}"
     );
+    Ok(())
+}
+
+#[test]
+fn a_skipped_update_is_logged_and_never_checkpointed() -> Result<()> {
+    second_order();
+    let dir = tempfile::tempdir()?;
+    let data_dir = simulated_dataset(dir.path(), 8, 3)?;
+    let mut config = tiny_config(&data_dir, false);
+    config.cadence.checkpoint_every = 1;
+    config.cadence.swd_every = 0;
+    let data = Poisoned {
+        inner: DatasetSource::open(&data_dir, 32)?,
+        poison: AtomicBool::new(false),
+    };
+    let run = dir.path().join("run");
+    let plan = RunPlan {
+        config,
+        resume: false,
+        notes: Vec::new(),
+    };
+    let mut training = GanTraining::open(&run, plan, 2, &Device::Cpu)?;
+    let mut held = Vec::new();
+    let mut skipped = Vec::new();
+    // Step 2's reals are NaN: D's update is skipped and its checkpoint held back.
+    training.run(&data, &AtomicBool::new(false), &mut |event| match event {
+        GanEvent::Step { done: 1, .. } => data.poison.store(true, Ordering::SeqCst),
+        GanEvent::Skipped { step, reason } => skipped.push((step, reason.to_string())),
+        GanEvent::CheckpointHeld { step, .. } => held.push(step),
+        _ => {}
+    })?;
+    assert_eq!(skipped, [(2, "D loss is NaN".to_string())]);
+    // Held after step 2 (its cadence) and at the end of the run (also step 2).
+    assert_eq!(held, [2, 2]);
+    let log = std::fs::read_to_string(run.join("log.csv"))?;
+    let rows: Vec<&str> = log.lines().collect();
+    assert!(rows[1].ends_with(",0.01,"), "{log}");
+    assert!(rows[2].ends_with(",0.01,D loss is NaN"), "{log}");
+    drop(training);
+    // The folder holds the state after step 1, the last good one.
+    let mut resumed = Trainer::new(tiny_config(&data_dir, false), &Device::Cpu)?;
+    resumed.load_state(&run)?;
+    assert_eq!(resumed.steps_done(), 1);
     Ok(())
 }

@@ -233,6 +233,41 @@ fn sample_is_deterministic_per_seed_and_writes_loadable_outputs() {
         .map(String::as_str)
         .collect();
     assert!(timings.contains("generate") && timings.contains("total"));
+
+    // A second run into the same folder would mix with the first: refused, unless
+    // --overwrite, which leaves only the new run's seed folders.
+    let again = ["--model", model, "--count", "1", "--seed", "9", "--out"];
+    let err = sample(&[&again[..], &[a.to_str().unwrap()]].concat()).unwrap_err();
+    let err = format!("{err:#}");
+    assert!(
+        err.contains(&a.display().to_string())
+            && err.contains("2 seed folder")
+            && err.contains("--overwrite"),
+        "{err}"
+    );
+    assert!(a.join("seed-0007").exists());
+    std::fs::write(a.join("notes.txt"), b"mine").unwrap();
+    sample(&[&again[..], &[a.to_str().unwrap(), "--overwrite"]].concat()).unwrap();
+    let seeds: Vec<String> = std::fs::read_dir(&a)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("seed-"))
+        .collect();
+    assert_eq!(seeds, ["seed-0009"]);
+    assert!(
+        a.join("notes.txt").exists(),
+        "--overwrite removed a file it did not write"
+    );
+
+    // While another process (here: a lock this test holds) writes the folder, sample fails
+    // at once naming the holder.
+    let _held = photomat_core::FolderLock::acquire(&b, "photomat sample").unwrap();
+    let err = sample(&[&again[..], &[b.to_str().unwrap(), "--overwrite"]].concat()).unwrap_err();
+    let err = format!("{err:#}");
+    assert!(
+        err.contains("is in use by process") && err.contains(&std::process::id().to_string()),
+        "{err}"
+    );
 }
 
 #[test]

@@ -158,7 +158,7 @@ fn train_estimator_unknown_brdf_lists_the_known_models() -> anyhow::Result<()> {
 
 #[test]
 fn estimator_training_driver_stops_after_the_step_the_flag_is_seen() -> anyhow::Result<()> {
-    use photomat_estimator::train::{Cadence, EstimatorSettings, EstimatorTraining};
+    use photomat_estimator::train::{EstimatorSettings, EstimatorTraining};
     use std::sync::atomic::AtomicBool;
     let dir = tempfile::tempdir()?;
     let (gan_dir, run) = (dir.path().join("gan"), dir.path().join("run"));
@@ -170,13 +170,11 @@ fn estimator_training_driver_stops_after_the_step_the_flag_is_seen() -> anyhow::
         finetune_steps: Some(0),
         batch: Some(1),
         width: Some(0.125),
+        panel_every: Some(100),
+        checkpoint_every: Some(100),
         ..EstimatorSettings::default()
     };
-    let cadence = Cadence {
-        panel_every: 100,
-        checkpoint_every: 100,
-    };
-    let mut training = EstimatorTraining::open(&run, &settings, false, cadence, &Device::Cpu)?;
+    let mut training = EstimatorTraining::open(&run, &settings, false, &Device::Cpu)?;
     let mut steps = Vec::new();
     let outcome = training.run(&AtomicBool::new(true), &mut |r, _| steps.push(r.step))?;
     assert!(outcome.interrupted);
@@ -184,14 +182,11 @@ fn estimator_training_driver_stops_after_the_step_the_flag_is_seen() -> anyhow::
     assert_eq!(steps, [1]);
     assert_eq!(log_steps(&run), [1]);
     assert!(outcome.panel.ends_with("panels/step-000001.png"));
-    // The stop flag is honoured with the checkpoint written: the run resumes to its total.
-    let mut resumed = EstimatorTraining::open(
-        &run,
-        &EstimatorSettings::default(),
-        true,
-        cadence,
-        &Device::Cpu,
-    )?;
+    // The stop flag is honoured with the checkpoint written: the run resumes to its total
+    // (once the first training, which holds the folder's lock, is dropped).
+    drop(training);
+    let mut resumed =
+        EstimatorTraining::open(&run, &EstimatorSettings::default(), true, &Device::Cpu)?;
     let outcome = resumed.run(&AtomicBool::new(false), &mut |_, _| {})?;
     assert!(!outcome.interrupted);
     assert_eq!((outcome.steps_run, outcome.steps_done), (2, 3));

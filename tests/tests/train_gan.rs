@@ -228,3 +228,45 @@ fn train_gan_errors_name_the_problem() {
     let err = photomat_error(&["train-gan", "--data", &data, "--out", run_s]);
     assert!(err.contains("--steps"), "{err}");
 }
+
+#[test]
+fn train_gan_resume_keeps_the_cadence_may_lower_the_lr_and_the_folder_is_locked() {
+    second_order();
+    let dir = tempfile::tempdir().unwrap();
+    let data = simulated_dataset(dir.path(), 64);
+    let data = path_str(&data).to_string();
+    let run = dir.path().join("run");
+    let flags: Vec<&str> = TINY
+        .iter()
+        .copied()
+        .chain(["--steps", "2", "--sample-every", "1", "--swd-every", "0"])
+        .collect();
+    train(Some(&data), &run, &flags).unwrap();
+    // Resumed without the cadence flags: a sample grid after every step still.
+    train(None, &run, &["--resume", "--steps", "4"]).unwrap();
+    assert!(run.join("samples/step-000003.png").is_file());
+
+    // A lower learning rate is what a diverged run's message recommends: allowed on resume,
+    // and log.csv says from which step it applies.
+    train(None, &run, &["--resume", "--steps", "5", "--lr", "0.001"]).unwrap();
+    let log = std::fs::read_to_string(run.join("log.csv")).unwrap();
+    let header: Vec<&str> = log.lines().next().unwrap().split(',').collect();
+    let lr_column = header.iter().position(|c| *c == "lr").unwrap();
+    let lrs: Vec<&str> = log
+        .lines()
+        .skip(1)
+        .map(|r| r.split(',').nth(lr_column).unwrap())
+        .collect();
+    assert_eq!(
+        lrs,
+        ["0.0025", "0.0025", "0.0025", "0.0025", "0.001"],
+        "{log}"
+    );
+
+    // While another process holds the run folder, a second train-gan fails at once.
+    let _held = photomat_core::FolderLock::acquire(&run, "photomat train-gan").unwrap();
+    let err = train(None, &run, &["--resume", "--steps", "6"])
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("is in use by process"), "{err}");
+}

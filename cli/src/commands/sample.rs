@@ -79,7 +79,7 @@ pub struct Args {
     /// model such as the bundled one, R for a fixed-size model (which makes R only)]. A
     /// spatial model makes any multiple of its generator's cell and its estimator's stride
     /// (32 for the bundled model) up to 4096; its texel keeps its size, so a larger side
-    /// shows more of the material, and memory grows with the side² (about 1.5 GB at 2048²).
+    /// shows more of the material, and memory grows with the side² (about 4.7 GB at 2048²).
     #[arg(long, value_name = "N",
           value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub size: Option<u32>,
@@ -89,6 +89,11 @@ pub struct Args {
     #[arg(long = "size-render", value_name = "PX",
           value_parser = clap::value_parser!(u32).range(8..=4096))]
     pub size_render: Option<u32>,
+
+    /// Replace the samples already in --out (its seed-* folders, contact_sheet.png and
+    /// summary.json; nothing else); without it a folder holding samples is refused.
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
 /// The model folder to use: `--model`, else `$PHOTOMAT_MODEL`, else the bundled one; an error
@@ -127,6 +132,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         mtlx: args.mtlx,
         size: args.size.map(|s| s as usize),
         render_size: args.size_render.map(|s| s as usize),
+        overwrite: args.overwrite,
     };
     let bar = progress_bar(
         args.count as u64,

@@ -27,7 +27,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use candle_core::Device;
-use photomat_estimator::train::{Cadence, EstimatorOutcome, EstimatorSettings, EstimatorTraining};
+use photomat_estimator::train::{EstimatorOutcome, EstimatorSettings, EstimatorTraining};
 
 use crate::common::{interruption, steps_bar, stop_flag};
 
@@ -84,15 +84,14 @@ pub struct Args {
     #[arg(long, value_name = "S")]
     pub seed: Option<u64>,
 
-    /// Steps between training panels in RUN_E/panels/.
-    #[arg(long, value_name = "K", default_value_t = 500,
-          value_parser = clap::value_parser!(u64).range(1..))]
-    pub panel_every: u64,
+    /// Steps between training panels in RUN_E/panels/ [default: 500; on --resume the run's,
+    /// from train.json].
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub panel_every: Option<u64>,
 
-    /// Steps between checkpoints.
-    #[arg(long, value_name = "K", default_value_t = 500,
-          value_parser = clap::value_parser!(u64).range(1..))]
-    pub checkpoint_every: u64,
+    /// Steps between checkpoints [default: 500; on --resume the run's].
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
+    pub checkpoint_every: Option<u64>,
 
     /// Continue the run in RUN_E from its last checkpoint.
     #[arg(long)]
@@ -127,18 +126,15 @@ impl Args {
             vgg19: self.vgg19.clone(),
             width: self.width,
             seed: self.seed,
+            panel_every: self.panel_every,
+            checkpoint_every: self.checkpoint_every,
         }
     }
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let cadence = Cadence {
-        panel_every: args.panel_every,
-        checkpoint_every: args.checkpoint_every,
-    };
     let run = &args.out;
-    let mut training =
-        EstimatorTraining::open(run, &args.settings(), args.resume, cadence, &Device::Cpu)?;
+    let mut training = EstimatorTraining::open(run, &args.settings(), args.resume, &Device::Cpu)?;
     let stop = stop_flag()?;
     let trainer = training.trainer();
     let config = trainer.config().clone();
@@ -159,11 +155,14 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     )?;
     let bar = steps_bar(total, start_step);
     let outcome = training.run(&stop, &mut |report, seconds| {
+        // On stderr whether or not it is a terminal, and in log.csv's `skipped` column.
         if report.skipped {
-            bar.println(format!(
-                "step {}: loss not finite (L1 {}, Gram {}), update skipped",
-                report.step, report.l1, report.gram
-            ));
+            bar.suspend(|| {
+                eprintln!(
+                    "warning: step {}: loss not finite (L1 {}, Gram {}), update skipped",
+                    report.step, report.l1, report.gram
+                )
+            });
         }
         bar.set_position(report.step);
         bar.set_message(format!(

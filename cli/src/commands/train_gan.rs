@@ -21,10 +21,14 @@
 //! - `samples/step-NNNNNN.png`: five fixed materials of G_ema under four lights each, a real
 //!   crop at the end of each row.
 //!
-//! `--resume` continues RUN from its last checkpoint with the same optimiser state and
-//! draws, until `--steps`/`--kimg` in total: the result is identical to an uninterrupted
-//! run. Architecture and training flags given with `--resume` must agree with `train.json`;
-//! a contradiction is an error naming the field.
+//! `--resume` continues RUN from its last checkpoint with the same optimiser state, draws and
+//! cadence of outputs (saved in `train.json`), until `--steps`/`--kimg` in total: the result
+//! is identical to an uninterrupted run. Architecture and training flags given with
+//! `--resume` must agree with `train.json` (a contradiction is an error naming the field),
+//! except `--lr` (lower it to continue a diverged run; log.csv records it) and the cadence
+//! flags. RUN is locked while the command runs: a second one on it fails naming this one's
+//! process id. A step whose update a non-finite value skipped is reported on stderr and in
+//! log.csv, and no checkpoint is written until a step updates again (docs/robustness.md).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -33,9 +37,7 @@ use anyhow::Context;
 use candle_core::Device;
 use indicatif::ProgressBar;
 use photomat_data::source::DatasetSource;
-use photomat_generator::train::{
-    Cadence, GanEvent, GanOutcome, GanSettings, GanTraining, RunLength,
-};
+use photomat_generator::train::{GanEvent, GanOutcome, GanSettings, GanTraining, RunLength};
 
 use crate::common::{interruption, steps_bar, stop_flag};
 
@@ -137,25 +139,24 @@ pub struct Args {
     #[arg(long, value_name = "P", requires = "spatial")]
     pub highlight_prob: Option<f64>,
 
-    /// Steps between checkpoints (state, GAN model folder).
-    #[arg(long, value_name = "N", default_value_t = 500,
-          value_parser = clap::value_parser!(u64).range(1..))]
-    pub checkpoint_every: u64,
+    /// Steps between checkpoints (state, GAN model folder) [default: 500; on --resume the
+    /// run's, from train.json].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub checkpoint_every: Option<u64>,
 
-    /// Steps between sample grids in RUN/samples/.
-    #[arg(long, value_name = "N", default_value_t = 500,
-          value_parser = clap::value_parser!(u64).range(1..))]
-    pub sample_every: u64,
+    /// Steps between sample grids in RUN/samples/ [default: 500; on --resume the run's].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub sample_every: Option<u64>,
 
     /// Steps between SWD measurements of G_ema against the data set (logged in log.csv;
-    /// 0: never).
-    #[arg(long, value_name = "N", default_value_t = 1000)]
-    pub swd_every: u64,
+    /// 0: never) [default: 1000; on --resume the run's].
+    #[arg(long, value_name = "N")]
+    pub swd_every: Option<u64>,
 
-    /// Fakes and real crops per SWD measurement (a fixed, seeded set).
-    #[arg(long, value_name = "N", default_value_t = 64,
-          value_parser = clap::value_parser!(u64).range(1..))]
-    pub swd_count: u64,
+    /// Fakes and real crops per SWD measurement (a fixed, seeded set) [default: 64; on
+    /// --resume the run's].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
+    pub swd_count: Option<u64>,
 
     /// Continue the run in RUN from its last checkpoint.
     #[arg(long)]
@@ -203,6 +204,10 @@ impl Args {
             highlight_prob: self.highlight_prob,
             light_mismatch: self.light_mismatch,
             relight_lobes: self.relight_lobes.clone().map(|l| l.0),
+            checkpoint_every: self.checkpoint_every,
+            sample_every: self.sample_every,
+            swd_every: self.swd_every,
+            swd_count: self.swd_count,
         }
     }
 
@@ -225,13 +230,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let data =
         DatasetSource::for_training(&plan.config).context("cannot open the training data")?;
     plan.bind_data(&data)?;
-    let cadence = Cadence {
-        checkpoint_every: args.checkpoint_every,
-        sample_every: args.sample_every,
-        swd_every: args.swd_every,
-        swd_count: args.swd_count,
-    };
-    let mut training = GanTraining::open(&args.out, plan, total, cadence, &Device::Cpu)?;
+    let mut training = GanTraining::open(&args.out, plan, total, &Device::Cpu)?;
     let stop = stop_flag()?;
     let start_step = training.trainer().steps_done();
     let c = training.trainer().config();
@@ -264,9 +263,16 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
 /// One event of the run on the progress bar.
 fn show(bar: &ProgressBar, event: GanEvent<'_>) {
     match event {
+        // On stderr whether or not it is a terminal (the bar's own lines are hidden when it
+        // is not), and in log.csv's `skipped` column.
         GanEvent::Skipped { step, reason } => {
-            bar.println(format!("step {step}: skipped the update: {reason}"))
+            bar.suspend(|| eprintln!("warning: step {step}: skipped the update: {reason}"))
         }
+        GanEvent::CheckpointHeld { step, reason } => bar.suspend(|| {
+            eprintln!(
+                "warning: no checkpoint after step {step}: {reason}; the previous one is kept"
+            )
+        }),
         GanEvent::SwdStarted { count } => {
             bar.set_message(format!("measuring SWD on {count} images"))
         }

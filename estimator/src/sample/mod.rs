@@ -56,7 +56,7 @@ use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
 use photomat_core::previews::map_previews;
 use photomat_core::sheet::{grid, resize_square};
-use photomat_core::{Brdf, FlashGeometry, LightSet, MaterialMaps, render_with};
+use photomat_core::{Brdf, FlashGeometry, FolderLock, LightSet, MaterialMaps, render_with};
 use photomat_generator::GanModel;
 use photomat_generator::model_files::GAN_MANIFEST_FILE;
 
@@ -107,6 +107,10 @@ pub struct SampleOptions {
     /// Side in pixels of each render and preview in the PNG sheets (`None`: the material's
     /// side); the maps keep the material's side.
     pub render_size: Option<usize>,
+    /// Replace the samples already in the output folder (its `seed-*` folders, contact
+    /// sheet and summary); without it a folder that holds samples is refused, so that two
+    /// runs never mix and summary.json lists every seed folder there.
+    pub overwrite: bool,
 }
 
 impl Default for SampleOptions {
@@ -121,6 +125,7 @@ impl Default for SampleOptions {
             mtlx: false,
             size: None,
             render_size: None,
+            overwrite: false,
         }
     }
 }
@@ -214,8 +219,10 @@ impl Sampler {
         Ok(side)
     }
 
-    /// Samples `options.count` materials into `out` (created), reporting to `progress`, and
-    /// writes `out/contact_sheet.png` and `out/summary.json`.
+    /// Samples `options.count` materials into `out` (created, and locked while it is
+    /// written: a second process on it fails naming this one), reporting to `progress`, and
+    /// writes `out/contact_sheet.png` and `out/summary.json`. A folder that already holds
+    /// samples is refused unless `options.overwrite`, which removes them first.
     pub fn run(
         &self,
         options: &SampleOptions,
@@ -245,8 +252,8 @@ impl Sampler {
         let lights = self.lights();
         let world_side = config.world_side(resolution)?;
         let geometry = lights.geometry_on(resolution, world_side, DType::F32, self.gan.device())?;
-        std::fs::create_dir_all(out)
-            .with_context(|| format!("cannot create '{}'", out.display()))?;
+        let _lock = FolderLock::acquire(out, "photomat sample")?;
+        clear_previous_samples(out, options.overwrite)?;
         if options.hextile && !config.tileable {
             progress(SampleEvent::Note(
                 "note: the model is not tileable; the maps' own border seam can show inside \
@@ -518,4 +525,53 @@ fn images(batch: &Tensor, side: usize) -> anyhow::Result<Vec<PlanarImage>> {
             ))
         })
         .collect()
+}
+
+/// What a sample run writes directly under its output folder, besides `seed-*` folders.
+const SAMPLE_FILES: [&str; 2] = [CONTACT_SHEET_FILE, SUMMARY_FILE];
+
+/// Whether `name` is a material folder of a sample run: `seed-` and the seed's digits.
+fn is_seed_folder(name: &str) -> bool {
+    name.strip_prefix("seed-")
+        .is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
+}
+
+/// Refuses an `out` that holds a previous run's samples, or with `overwrite` removes them
+/// (the `seed-*` folders, the contact sheet and the summary; nothing else in `out`).
+fn clear_previous_samples(out: &Path, overwrite: bool) -> anyhow::Result<()> {
+    let entries =
+        std::fs::read_dir(out).with_context(|| format!("cannot list '{}'", out.display()))?;
+    let mut previous = Vec::new();
+    for entry in entries.flatten() {
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
+        if (is_dir && is_seed_folder(&name)) || (!is_dir && SAMPLE_FILES.contains(&name.as_str())) {
+            previous.push((entry.path(), is_dir));
+        }
+    }
+    if previous.is_empty() {
+        return Ok(());
+    }
+    if !overwrite {
+        let folders = previous.iter().filter(|(_, d)| *d).count();
+        bail!(
+            "'{}' already holds samples ({folders} seed folder(s){}); add --overwrite to \
+             replace them, or choose another --out",
+            out.display(),
+            if previous.iter().any(|(p, _)| p.ends_with(SUMMARY_FILE)) {
+                ", summary.json"
+            } else {
+                ""
+            }
+        );
+    }
+    for (path, is_dir) in previous {
+        let removed = if is_dir {
+            std::fs::remove_dir_all(&path)
+        } else {
+            std::fs::remove_file(&path)
+        };
+        removed.with_context(|| format!("--overwrite: cannot remove '{}'", path.display()))?;
+    }
+    Ok(())
 }

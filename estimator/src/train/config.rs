@@ -54,6 +54,30 @@ pub struct TrainConfig {
     pub feature_seed: u64,
     /// Consecutive steps with a non-finite loss after which training stops with an error.
     pub max_nan_steps: u32,
+    /// Steps between the run's periodic outputs, kept by a resume unless it gives others.
+    /// Absent from older `train.json` files: [`Cadence::default`].
+    #[serde(default)]
+    pub cadence: Cadence,
+}
+
+/// Steps between an estimator run's periodic outputs. They do not change what the run
+/// trains, so a resume may give others.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Cadence {
+    /// Steps between training panels; at least 1.
+    pub panel_every: u64,
+    /// Steps between checkpoints; at least 1.
+    pub checkpoint_every: u64,
+}
+
+impl Default for Cadence {
+    fn default() -> Self {
+        Self {
+            panel_every: 500,
+            checkpoint_every: 500,
+        }
+    }
 }
 
 impl Default for TrainConfig {
@@ -75,6 +99,7 @@ impl Default for TrainConfig {
             vgg19: None,
             feature_seed: DEFAULT_RANDOM_FEATURE_SEED,
             max_nan_steps: 10,
+            cadence: Cadence::default(),
         }
     }
 }
@@ -126,6 +151,13 @@ impl TrainConfig {
 
     /// Checks every field for a GAN of side `resolution`; errors name the field.
     pub fn validate(&self, resolution: usize) -> Result<()> {
+        if self.cadence.panel_every == 0 || self.cadence.checkpoint_every == 0 {
+            invalid!(
+                "cadence.panel_every and checkpoint_every must be at least 1 (got {}, {})",
+                self.cadence.panel_every,
+                self.cadence.checkpoint_every
+            );
+        }
         if self.batch == 0 {
             invalid!("batch must be at least 1");
         }
@@ -154,7 +186,7 @@ impl TrainConfig {
             invalid!("gram_scales must be at least 1");
         }
         let size = self.finetune_l1_size;
-        if self.finetune_steps > 0 && (size == 0 || resolution % size != 0) {
+        if self.finetune_steps > 0 && (size == 0 || !resolution.is_multiple_of(size)) {
             invalid!(
                 "finetune_l1_size {size} must divide the GAN's resolution {resolution} \
                  (the fine-tune's L1 compares {size}×{size} area downsamples)"
@@ -181,7 +213,7 @@ impl TrainConfig {
             invalid!("training configs are not JSON objects");
         };
         for (key, value) in a {
-            if matches!(key.as_str(), "steps" | "finetune_steps") {
+            if matches!(key.as_str(), "steps" | "finetune_steps" | "cadence") {
                 continue;
             }
             if b.get(key) != Some(value) {

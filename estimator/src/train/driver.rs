@@ -26,7 +26,7 @@ use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::paths::absolute;
 use photomat_core::previews::map_previews;
 use photomat_core::sheet::grid;
-use photomat_core::{Highlight, lookup};
+use photomat_core::{FolderLock, Highlight, lookup};
 use photomat_generator::GanModel;
 
 use super::config::TrainConfig;
@@ -70,24 +70,10 @@ pub struct EstimatorSettings {
     pub width: Option<f64>,
     /// Seed of the run.
     pub seed: Option<u64>,
-}
-
-/// Steps between the run's periodic outputs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Cadence {
-    /// Steps between training panels; at least 1.
-    pub panel_every: u64,
-    /// Steps between checkpoints; at least 1.
-    pub checkpoint_every: u64,
-}
-
-impl Default for Cadence {
-    fn default() -> Self {
-        Self {
-            panel_every: 500,
-            checkpoint_every: 500,
-        }
-    }
+    /// Steps between training panels ([`TrainConfig::cadence`]).
+    pub panel_every: Option<u64>,
+    /// Steps between checkpoints ([`TrainConfig::cadence`]).
+    pub checkpoint_every: Option<u64>,
 }
 
 /// How an [`EstimatorTraining::run`] ended.
@@ -113,20 +99,22 @@ pub struct EstimatorTraining {
     run: PathBuf,
     gan_dir: PathBuf,
     log: std::fs::File,
-    cadence: Cadence,
+    // Held while the run is open: one writer per run folder.
+    _lock: FolderLock,
 }
 
 impl EstimatorTraining {
-    /// Opens the run in `run`: a fresh one from `settings` (an error if `run` already holds
-    /// one; the GAN copy, E and the settings are written at once) or, on `resume`, the saved
-    /// one after checking that no setting contradicts it.
+    /// Opens the run in `run` (locked until the training is dropped: a second process on the
+    /// folder fails naming this one): a fresh one from `settings` (an error if `run` already
+    /// holds one; the GAN copy, E and the settings are written at once) or, on `resume`, the
+    /// saved one after checking that no setting contradicts it (the cadence may change).
     pub fn open(
         run: &Path,
         settings: &EstimatorSettings,
         resume: bool,
-        cadence: Cadence,
         device: &Device,
     ) -> anyhow::Result<Self> {
+        let lock = FolderLock::acquire(run, "photomat train-estimator")?;
         let state = run.join(TRAIN_STATE_FILE);
         if resume && !state.exists() {
             bail!(
@@ -159,7 +147,7 @@ impl EstimatorTraining {
             run: run.to_path_buf(),
             gan_dir,
             log,
-            cadence,
+            _lock: lock,
         })
     }
 
@@ -195,10 +183,10 @@ impl EstimatorTraining {
             progress(&report, seconds);
             let done = report.step;
             last = Some(report);
-            if done % self.cadence.panel_every == 0 {
+            if done % self.trainer.config().cadence.panel_every == 0 {
                 self.write_panel()?;
             }
-            if done % self.cadence.checkpoint_every == 0 {
+            if done % self.trainer.config().cadence.checkpoint_every == 0 {
                 checkpoint(&self.trainer, &self.run, &self.gan_dir)?;
             }
             if stop.load(Ordering::SeqCst) {
@@ -269,6 +257,12 @@ fn apply_settings(mut config: TrainConfig, settings: &EstimatorSettings) -> Trai
     }
     if let Some(path) = &settings.vgg19 {
         config.vgg19 = Some(absolute(path));
+    }
+    if let Some(v) = settings.panel_every {
+        config.cadence.panel_every = v;
+    }
+    if let Some(v) = settings.checkpoint_every {
+        config.cadence.checkpoint_every = v;
     }
     config
 }

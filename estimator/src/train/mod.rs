@@ -18,9 +18,9 @@ pub mod objective;
 pub mod state;
 pub mod trainer;
 
-pub use config::{Stage, TrainConfig};
+pub use config::{Cadence, Stage, TrainConfig};
 pub use draws::StepDraws;
-pub use driver::{Cadence, EstimatorOutcome, EstimatorSettings, EstimatorTraining};
+pub use driver::{EstimatorOutcome, EstimatorSettings, EstimatorTraining};
 pub use objective::{LossTerms, Objective};
 pub use state::{TRAIN_MANIFEST_FILE, TRAIN_STATE_FILE, TrainManifest, copy_gan_model};
 pub use trainer::{EstimatorTrainer, Preview, StepReport};

@@ -90,7 +90,7 @@ impl EstimatorTrainer {
         config.validate(resolution)?;
         let arch = model.estimator().config();
         let stride = arch.total_stride();
-        if resolution % stride != 0 {
+        if !resolution.is_multiple_of(stride) {
             return Err(Error::Invalid(format!(
                 "the GAN's resolution {resolution} is not divisible by the estimator's total \
                  stride {stride} ({} levels): use a GAN of a multiple of {stride} texels or an \

@@ -332,7 +332,12 @@ pub fn sliced_wasserstein_descriptors(
     repeats: usize,
     seed: u64,
 ) -> Result<f64> {
-    if dim == 0 || a.is_empty() || b.is_empty() || a.len() % dim != 0 || b.len() % dim != 0 {
+    if dim == 0
+        || a.is_empty()
+        || b.is_empty()
+        || !a.len().is_multiple_of(dim)
+        || !b.len().is_multiple_of(dim)
+    {
         bail!(
             "SWD: point sets of {} and {} values are not non-empty sets of {dim}-vectors",
             a.len(),

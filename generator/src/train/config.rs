@@ -79,6 +79,36 @@ pub struct TrainConfig {
     /// [`DEFAULT_LIGHT_MISMATCH`]; absent from older `train.json` files: 0 (the term off).
     #[serde(default)]
     pub light_mismatch: f64,
+    /// Steps between the run's periodic outputs, so that a resumed run keeps them. Absent
+    /// from older `train.json` files: [`Cadence::default`], the flags' defaults then.
+    #[serde(default)]
+    pub cadence: Cadence,
+}
+
+/// Steps between a run's periodic outputs. They do not change what the run trains: a resume
+/// may give others ([`TrainConfig::with_resume_changes`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Cadence {
+    /// Steps between checkpoints (state and GAN model folder); at least 1.
+    pub checkpoint_every: u64,
+    /// Steps between sample grids; at least 1.
+    pub sample_every: u64,
+    /// Steps between SWD measurements (0: never).
+    pub swd_every: u64,
+    /// Fakes and real crops per SWD measurement; at least 1.
+    pub swd_count: u64,
+}
+
+impl Default for Cadence {
+    fn default() -> Self {
+        Self {
+            checkpoint_every: 500,
+            sample_every: 500,
+            swd_every: 1000,
+            swd_count: 64,
+        }
+    }
 }
 
 /// Default [`TrainConfig::light_mismatch`]. Without the term, D conditioned on ω by
@@ -145,6 +175,20 @@ impl TrainConfig {
             nan_limit: 20,
             patches: spatial.then(PatchTraining::default),
             light_mismatch: DEFAULT_LIGHT_MISMATCH,
+            cadence: Cadence::default(),
+        }
+    }
+
+    /// `self` (a saved configuration) with the fields that a resume may change taken from
+    /// `requested`: where the data set lives, the base learning rate (what the message of a
+    /// diverged run recommends lowering; `log.csv` records it per step) and the cadence of
+    /// outputs. Everything else must stay as saved for the run to continue the same training.
+    pub fn with_resume_changes(&self, requested: &TrainConfig) -> TrainConfig {
+        TrainConfig {
+            data: requested.data.clone(),
+            lr: requested.lr,
+            cadence: requested.cadence,
+            ..self.clone()
         }
     }
 
@@ -208,6 +252,16 @@ impl TrainConfig {
         }
         if self.nan_limit == 0 {
             bail!("nan_limit must be at least 1");
+        }
+        let c = &self.cadence;
+        if c.checkpoint_every == 0 || c.sample_every == 0 || c.swd_count == 0 {
+            bail!(
+                "cadence.checkpoint_every, sample_every and swd_count must be at least 1 \
+                 (got {}, {}, {})",
+                c.checkpoint_every,
+                c.sample_every,
+                c.swd_count
+            );
         }
         match (&self.generator.spatial, &self.patches) {
             (Some(_), None) => bail!("a spatial generator trains on patches: set `patches`"),

@@ -5,11 +5,17 @@
 //! [`GanTraining::plan`] turns [`GanSettings`] into the run's [`TrainConfig`]: a fresh run
 //! takes every setting (with the CPU-sized defaults), a resumed one keeps `train.json` and
 //! refuses a setting that contradicts it ([`RESUME_FIXED`] lists the fields that may not
-//! change; only the data folder may move). The caller opens the training data the plan names
-//! (any [`TrainingData`]), then [`GanTraining::open`] and [`GanTraining::run`], which stops
-//! after the current step when the stop flag is set (e.g. by a Ctrl-C handler) and reports to
-//! a progress callback. A resumed run continues with the same optimiser state and draws: the
-//! result is identical to an uninterrupted run.
+//! change; the data folder may move, the learning rate and the cadence of outputs may change).
+//! The caller opens the training data the plan names (any [`TrainingData`]), then
+//! [`GanTraining::open`], which locks the folder, and [`GanTraining::run`], which stops after
+//! the current step when the stop flag is set (e.g. by a Ctrl-C handler) and reports to a
+//! progress callback. A resumed run continues with the same optimiser state and draws: with
+//! the same learning rate the result is identical to an uninterrupted run.
+//!
+//! A checkpoint is written only from a sound state ([`Trainer::unsound_state`]): after a step
+//! that skipped an update, or with non-finite weights, the previous checkpoint stays, so a
+//! diverging run can be resumed from its last good state with a lower `--lr`
+//! (docs/robustness.md).
 //!
 //! The run folder holds `train.json` + `train_state.safetensors` (every checkpoint), the GAN
 //! model folder `gan.json` + `gan.safetensors`, `log.csv` and `samples/step-NNNNNN.png`.
@@ -20,10 +26,11 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use candle_core::Device;
+use photomat_core::FolderLock;
 use photomat_core::image_io::{PngBits, write_png};
 use photomat_core::paths::absolute;
 
-use super::config::TrainConfig;
+use super::config::{Cadence, TrainConfig};
 use super::data::TrainingData;
 use super::log::{LogRow, TrainLog};
 use super::samples::sample_grid;
@@ -80,10 +87,32 @@ pub struct GanSettings {
     /// Exponents of M's Phong-lobe light input ([`GeneratorConfig::relight_lobes`]; empty:
     /// the paper's M on F ‖ ω). Default for new runs [`DEFAULT_RELIGHT_LOBES`].
     pub relight_lobes: Option<Vec<f64>>,
+    /// Steps between checkpoints ([`Cadence::checkpoint_every`]).
+    pub checkpoint_every: Option<u64>,
+    /// Steps between sample grids ([`Cadence::sample_every`]).
+    pub sample_every: Option<u64>,
+    /// Steps between SWD measurements ([`Cadence::swd_every`]).
+    pub swd_every: Option<u64>,
+    /// Images per SWD measurement ([`Cadence::swd_count`]).
+    pub swd_count: Option<u64>,
+}
+
+impl GanSettings {
+    /// `cadence` with every cadence setting that was given applied.
+    fn cadence_over(&self, cadence: Cadence) -> Cadence {
+        Cadence {
+            checkpoint_every: self.checkpoint_every.unwrap_or(cadence.checkpoint_every),
+            sample_every: self.sample_every.unwrap_or(cadence.sample_every),
+            swd_every: self.swd_every.unwrap_or(cadence.swd_every),
+            swd_count: self.swd_count.unwrap_or(cadence.swd_count),
+        }
+    }
 }
 
 /// The settings that a resume may not change: (flag, field of `train.json`, the given value,
-/// the saved value), both as text. The data folder is the exception: it may move.
+/// the saved value), both as text. The exceptions ([`TrainConfig::with_resume_changes`]): the
+/// data folder may move, `--lr` may change (as a diverged run's message recommends) and so may
+/// the cadence of outputs.
 type FixedField = (
     &'static str,
     &'static str,
@@ -92,7 +121,7 @@ type FixedField = (
 );
 
 /// Every setting fixed at the start of a run, with its command-line flag.
-pub const RESUME_FIXED: [FixedField; 15] = [
+pub const RESUME_FIXED: [FixedField; 14] = [
     (
         "--size",
         "generator.resolution",
@@ -163,12 +192,6 @@ pub const RESUME_FIXED: [FixedField; 15] = [
         |c| c.seed.to_string(),
     ),
     (
-        "--lr",
-        "lr",
-        |s| s.lr.map(|v| v.to_string()),
-        |c| c.lr.to_string(),
-    ),
-    (
         "--r1-gamma",
         "r1_gamma",
         |s| s.r1_gamma.map(|v| v.to_string()),
@@ -228,30 +251,6 @@ impl RunLength {
     }
 }
 
-/// Steps between the run's periodic outputs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Cadence {
-    /// Steps between checkpoints (state and GAN model folder); at least 1.
-    pub checkpoint_every: u64,
-    /// Steps between sample grids; at least 1.
-    pub sample_every: u64,
-    /// Steps between SWD measurements (0: never).
-    pub swd_every: u64,
-    /// Fakes and real crops per SWD measurement.
-    pub swd_count: u64,
-}
-
-impl Default for Cadence {
-    fn default() -> Self {
-        Self {
-            checkpoint_every: 500,
-            sample_every: 500,
-            swd_every: 1000,
-            swd_count: 64,
-        }
-    }
-}
-
 /// The configuration a run will train with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunPlan {
@@ -298,6 +297,9 @@ pub enum GanEvent<'a> {
     },
     /// A step skipped an update (a non-finite loss or gradient).
     Skipped { step: u64, reason: &'a str },
+    /// The checkpoint after step `step` was not written: the state is not sound (a skipped
+    /// update or non-finite weights), so the previous checkpoint stays the last good one.
+    CheckpointHeld { step: u64, reason: &'a str },
     /// An SWD measurement of `count` images starts.
     SwdStarted { count: u64 },
     /// The SWD measurement progressed.
@@ -330,9 +332,10 @@ pub struct GanTraining {
     trainer: Trainer,
     run: PathBuf,
     log: TrainLog,
-    cadence: Cadence,
     total: u64,
     device: Device,
+    // Held while the run is open: one writer per run folder.
+    _lock: FolderLock,
 }
 
 impl GanTraining {
@@ -364,19 +367,14 @@ impl GanTraining {
         }
     }
 
-    /// Opens the run of `plan` in `run` (created) to train up to `total` steps: a fresh run
-    /// writes its first checkpoint at once, a resumed one loads its state and keeps the log
-    /// rows up to it.
-    pub fn open(
-        run: &Path,
-        plan: RunPlan,
-        total: u64,
-        cadence: Cadence,
-        device: &Device,
-    ) -> anyhow::Result<Self> {
+    /// Opens the run of `plan` in `run` (created and locked until the training is dropped: a
+    /// second process on the folder fails naming this one) to train up to `total` steps: a
+    /// fresh run writes its first checkpoint at once, a resumed one loads its state and keeps
+    /// the log rows up to it. Temporary files of a killed checkpoint are removed.
+    pub fn open(run: &Path, plan: RunPlan, total: u64, device: &Device) -> anyhow::Result<Self> {
         // Before any backward pass of this thread (the R1 penalty is a double backward).
         enable_second_order_gradients();
-        std::fs::create_dir_all(run).with_context(|| format!("cannot create {}", run.display()))?;
+        let lock = FolderLock::acquire(run, "photomat train-gan")?;
         let mut trainer = Trainer::new(plan.config, device)?;
         let log_path = run.join("log.csv");
         let log = if plan.resume {
@@ -392,9 +390,9 @@ impl GanTraining {
             trainer,
             run: run.to_path_buf(),
             log,
-            cadence,
             total,
             device: device.clone(),
+            _lock: lock,
         })
     }
 
@@ -454,6 +452,8 @@ impl GanTraining {
                 seconds,
                 swd,
                 path_length: stats.path_length,
+                lr: self.trainer.config().lr,
+                skipped: stats.skipped.clone(),
             })?;
             progress(GanEvent::Step {
                 stats: &stats,
@@ -461,18 +461,18 @@ impl GanTraining {
                 done,
                 kimg,
             });
-            if done % self.cadence.sample_every == 0 {
+            if done.is_multiple_of(self.trainer.config().cadence.sample_every) {
                 self.write_samples(data)?;
             }
-            if done % self.cadence.checkpoint_every == 0 {
-                checkpoint(&self.trainer, &self.run)?;
+            if done.is_multiple_of(self.trainer.config().cadence.checkpoint_every) {
+                self.checkpoint_if_sound(progress)?;
             }
             if stop.load(Ordering::SeqCst) {
                 interrupted = true;
                 break;
             }
         }
-        checkpoint(&self.trainer, &self.run)?;
+        self.checkpoint_if_sound(progress)?;
         let samples = self.write_samples(data)?;
         Ok(GanOutcome {
             interrupted,
@@ -485,6 +485,21 @@ impl GanTraining {
         })
     }
 
+    /// Checkpoints unless the state is unsound ([`Trainer::unsound_state`]): then the last
+    /// checkpoint, the last good state, stays and `progress` hears why.
+    fn checkpoint_if_sound(&self, progress: &mut dyn FnMut(GanEvent<'_>)) -> anyhow::Result<()> {
+        match self.trainer.unsound_state()? {
+            None => checkpoint(&self.trainer, &self.run),
+            Some(reason) => {
+                progress(GanEvent::CheckpointHeld {
+                    step: self.trainer.steps_done(),
+                    reason: &reason,
+                });
+                Ok(())
+            }
+        }
+    }
+
     /// The SWD×10³ of G_ema when step `done` is on the SWD cadence.
     fn swd_at(
         &self,
@@ -492,11 +507,11 @@ impl GanTraining {
         data: &dyn TrainingData,
         progress: &mut dyn FnMut(GanEvent<'_>),
     ) -> anyhow::Result<Option<f64>> {
-        let every = self.cadence.swd_every;
-        if every == 0 || done % every != 0 {
+        let every = self.trainer.config().cadence.swd_every;
+        if every == 0 || !done.is_multiple_of(every) {
             return Ok(None);
         }
-        let count = self.cadence.swd_count;
+        let count = self.trainer.config().cadence.swd_count;
         progress(GanEvent::SwdStarted { count });
         let report = model_swd(
             self.trainer.ema_model(),
@@ -579,6 +594,7 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
     if let Some(lr) = settings.lr {
         config.lr = lr;
     }
+    config.cadence = settings.cadence_over(Cadence::default());
     if let Some(w) = settings.pl_weight {
         config.pl_weight = w;
     }
@@ -629,6 +645,28 @@ fn resumed_config(run: &Path, settings: &GanSettings) -> anyhow::Result<RunPlan>
             conflicts.join("; ")
         );
     }
+    if let Some(lr) = settings.lr
+        && lr != saved.lr
+    {
+        notes.push(format!(
+            "note: learning rate {lr} from here on (the run had {}; log.csv's `lr` column \
+             records it per step)",
+            saved.lr
+        ));
+        saved.lr = lr;
+    }
+    let cadence = settings.cadence_over(saved.cadence);
+    if cadence != saved.cadence {
+        notes.push(format!(
+            "note: checkpoints every {}, samples every {}, SWD every {} steps on {} images \
+             from here on",
+            cadence.checkpoint_every, cadence.sample_every, cadence.swd_every, cadence.swd_count
+        ));
+        saved.cadence = cadence;
+    }
+    saved
+        .validate()
+        .map_err(|e| anyhow::anyhow!("invalid training settings: {e}"))?;
     Ok(RunPlan {
         config: saved,
         resume: true,

@@ -2,8 +2,10 @@
 //! as soon as its step ends), so a plot of a live run or of an interrupted one is always
 //! possible. Columns: [`LOG_HEADER`]; empty cells where a value was not computed that step
 //! (R1 every 16 steps, SWD every `--swd-every` steps, path length every 4 steps when on,
-//! `light_gap` when the light-mismatch term is off). Logs of runs from before `light_gap`
-//! existed keep their ten-column rows under the longer header.
+//! `light_gap` when the light-mismatch term is off; `skipped` lists the phases whose update a
+//! non-finite value skipped, `;`-separated). `lr` is the base learning rate of the step, which
+//! a resume may change. Logs of runs from before the later columns existed keep their shorter
+//! rows under the longer header.
 //!
 //! Resuming at S steps drops the rows of steps after S (written after the checkpoint the run
 //! resumes from), so the log reads as one uninterrupted run.
@@ -16,8 +18,8 @@ use candle_core::Result;
 use photomat_core::image_io::write_atomic;
 
 /// The header line.
-pub const LOG_HEADER: &str =
-    "step,kimg,loss_g,loss_d,real_logit,fake_logit,logit_gap,r1,seconds,swd,path_length,light_gap";
+pub const LOG_HEADER: &str = "step,kimg,loss_g,loss_d,real_logit,fake_logit,logit_gap,r1,seconds,swd,\
+path_length,light_gap,lr,skipped";
 
 /// One row: the state after step `step` (steps done, 1-based).
 #[derive(Debug, Clone, PartialEq)]
@@ -45,6 +47,10 @@ pub struct LogRow {
     pub swd: Option<f64>,
     /// Mean path length, on path-length steps.
     pub path_length: Option<f64>,
+    /// Base learning rate of the step.
+    pub lr: f64,
+    /// Why phases of the step skipped their update (e.g. `D loss is NaN`).
+    pub skipped: Vec<String>,
 }
 
 impl LogRow {
@@ -52,7 +58,7 @@ impl LogRow {
     pub fn line(&self) -> String {
         let opt = |v: Option<f64>| v.map(|v| format!("{v}")).unwrap_or_default();
         format!(
-            "{},{:.3},{},{},{},{},{},{},{:.3},{},{},{}",
+            "{},{:.3},{},{},{},{},{},{},{:.3},{},{},{},{},{}",
             self.step,
             self.kimg,
             self.loss_g,
@@ -64,7 +70,10 @@ impl LogRow {
             self.seconds,
             opt(self.swd),
             opt(self.path_length),
-            opt(self.mismatch_logit.map(|m| self.real_logit - m))
+            opt(self.mismatch_logit.map(|m| self.real_logit - m)),
+            self.lr,
+            // Commas would split the cell.
+            self.skipped.join(";").replace(',', ";")
         )
     }
 }
@@ -144,11 +153,17 @@ mod tests {
             loss_d: 1.3,
             real_logit: 0.5,
             fake_logit: -0.25,
-            r1: (step % 2 == 0).then_some(0.01),
+            r1: step.is_multiple_of(2).then_some(0.01),
             seconds: 1.5,
             swd: None,
             mismatch_logit: None,
             path_length: None,
+            lr: 0.0025,
+            skipped: if step == 2 {
+                vec!["D loss is NaN".into(), "R1 gradient is not finite".into()]
+            } else {
+                Vec::new()
+            },
         }
     }
 
@@ -172,6 +187,10 @@ mod tests {
             "{text}"
         );
         assert_eq!(lines[3].split(',').nth(7), Some(""));
+        assert!(
+            lines[2].ends_with(",0.0025,D loss is NaN;R1 gradient is not finite"),
+            "{text}"
+        );
         assert_eq!(lines[0].split(',').count(), lines[1].split(',').count());
     }
 }

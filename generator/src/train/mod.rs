@@ -28,8 +28,7 @@ pub mod state;
 pub mod streams;
 pub mod trainer;
 
-pub use config::PatchTraining;
-pub use config::TrainConfig;
+pub use config::{Cadence, PatchTraining, TrainConfig};
 pub use data::{FlashPlacement, RealBatch, TrainingData};
-pub use driver::{Cadence, GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan};
+pub use driver::{GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan};
 pub use trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};

@@ -62,15 +62,12 @@ pub fn save_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()
 }
 
 /// Loads the run folder `dir` into `state`, after checking that its configuration is
-/// `config` (the data set's path aside); errors name the file and the differing fields or
+/// `config` (up to [`TrainConfig::with_resume_changes`]); errors name the file and the differing fields or
 /// tensors.
 pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()> {
     let saved = read_config(dir)?;
-    // Where the data set lives is not part of the trained state: a moved data set resumes.
-    let mut relocated = TrainConfig {
-        data: config.data.clone(),
-        ..saved
-    };
+    // The data set's place, the learning rate and the cadence may change on resume.
+    let mut relocated = saved.with_resume_changes(config);
     // A spatial run saved before texel sizes were recorded takes the one its data gives
     // (`RunPlan::bind_data` checks it against the data set).
     if let (Some(saved), Some(requested)) = (

@@ -287,6 +287,36 @@ impl Trainer {
         &self.state
     }
 
+    /// Why the current state should not be checkpointed, if it should not: the last step
+    /// skipped an update (the run may be diverging; the previous checkpoint is the last good
+    /// one), or a variable of the state holds a non-finite value.
+    pub fn unsound_state(&self) -> Result<Option<String>> {
+        if self.guard.streak() > 0 {
+            return Ok(Some(format!(
+                "the last {} step(s) skipped an update",
+                self.guard.streak()
+            )));
+        }
+        let data = self.state.data().lock().expect("VarMap lock poisoned");
+        let mut names: Vec<&String> = data.keys().collect();
+        names.sort();
+        for name in names {
+            let t = data[name].as_tensor();
+            // Finite values have |v| < ∞ and NaN fails every comparison, so the indicator's
+            // sum counts the finite entries (in f64: exact for any tensor size here).
+            let finite = t
+                .abs()?
+                .lt(f64::INFINITY)?
+                .to_dtype(DType::F64)?
+                .sum_all()?
+                .to_scalar::<f64>()?;
+            if (finite as usize) < t.elem_count() {
+                return Ok(Some(format!("`{name}` holds non-finite values")));
+            }
+        }
+        Ok(None)
+    }
+
     /// Writes `train_state.safetensors` and `train.json` into the run folder `dir`.
     pub fn save_state(&self, dir: &Path) -> Result<()> {
         self.counters.set(&Tensor::new(
@@ -413,7 +443,7 @@ impl Trainer {
 
         // 1b. Lazy path-length regularisation of G (optional).
         if let Some(mean) = &self.pl_mean
-            && step % self.config.g_reg_interval as u64 == 0
+            && step.is_multiple_of(self.config.g_reg_interval as u64)
         {
             let pb = (b / PL_BATCH_SHRINK).max(1);
             // candle keeps gradients only for variables: the lengths are taken with respect
@@ -480,19 +510,20 @@ impl Trainer {
         seconds.d = lap();
 
         // 3. Lazy R1 on the same reals.
-        let r1 = if step % self.config.r1_interval as u64 == 0 && self.config.r1_gamma > 0.0 {
-            let penalty = self.d.r1_penalty(&reals.images, &reals.omega)?;
-            let loss = r1_loss(&penalty, self.config.r1_gamma, self.config.r1_interval)?;
-            let value = scalar(&loss)?;
-            let grads = loss.backward()?;
-            let finite = gradients_finite(&grads, self.opt_d.vars().map(|(_, v)| v))?;
-            if self.guard.allow("R1", value, finite) {
-                self.opt_d.step(&grads)?;
-            }
-            Some(scalar(&penalty.mean_all()?)?)
-        } else {
-            None
-        };
+        let r1 =
+            if step.is_multiple_of(self.config.r1_interval as u64) && self.config.r1_gamma > 0.0 {
+                let penalty = self.d.r1_penalty(&reals.images, &reals.omega)?;
+                let loss = r1_loss(&penalty, self.config.r1_gamma, self.config.r1_interval)?;
+                let value = scalar(&loss)?;
+                let grads = loss.backward()?;
+                let finite = gradients_finite(&grads, self.opt_d.vars().map(|(_, v)| v))?;
+                if self.guard.allow("R1", value, finite) {
+                    self.opt_d.step(&grads)?;
+                }
+                Some(scalar(&penalty.mean_all()?)?)
+            } else {
+                None
+            };
         seconds.r1 = lap();
 
         // 4. G_ema.
