@@ -68,6 +68,10 @@ const KERNEL: usize = 3;
 /// Most encoder levels accepted: 2¹⁶ = 65536 texels per side is beyond any material size,
 /// and the bound keeps `total_stride` far from overflow.
 const MAX_LEVELS: usize = 16;
+/// Most channels of any conv (the paper's widest level has 512; ×8).
+pub const MAX_CHANNELS: usize = 4096;
+/// Most trainable scalars (the paper's E has about 30 M; 200 M is 0.8 GB of f32 weights).
+pub const MAX_PARAMETERS: usize = 200_000_000;
 
 /// Architecture of [`Estimator`]. The defaults are the paper's configuration for
 /// `height(ggx)` (n = 8).
@@ -186,6 +190,20 @@ impl EstimatorConfig {
         let widths = [self.in_channels, self.out_channels];
         if widths.iter().chain(enc).chain(dec).any(|&c| c == 0) {
             bail!("estimator config: every channel count must be ≥ 1, got {self:?}");
+        }
+        // Checked before any weight is allocated: a corrupt estimator.json must be an error,
+        // not an allocation that aborts the process.
+        if let Some(c) = widths
+            .iter()
+            .chain(enc)
+            .chain(dec)
+            .find(|&&c| c > MAX_CHANNELS)
+        {
+            bail!("estimator config: a channel count of {c} exceeds the limit of {MAX_CHANNELS}");
+        }
+        let parameters = self.num_parameters();
+        if parameters > MAX_PARAMETERS {
+            bail!("estimator config: {parameters} parameters exceed the limit of {MAX_PARAMETERS}");
         }
         if !(0.0..=1.0).contains(&self.leaky_slope) {
             bail!(

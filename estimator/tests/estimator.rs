@@ -376,3 +376,25 @@ fn estimator_variables_mirror_the_documented_names() -> Result<()> {
     assert_eq!(shape("head.weight"), [8, 32, 3, 3]);
     Ok(())
 }
+
+#[test]
+fn the_reference_fits_the_limits_and_an_oversized_config_is_refused() {
+    use photomat_estimator::unet::{MAX_CHANNELS, MAX_PARAMETERS};
+    let reference = EstimatorConfig::default();
+    reference.validate().unwrap();
+    assert!(reference.num_parameters() < MAX_PARAMETERS / 4);
+    let wide = EstimatorConfig {
+        encoder_channels: vec![1_000_000; 5],
+        ..EstimatorConfig::default()
+    };
+    let err = wide.validate().unwrap_err().to_string();
+    assert!(err.contains("1000000") && err.contains("limit"), "{err}");
+    // Every width at the channel limit: each 3×3 conv alone has 151 M weights.
+    let heavy = EstimatorConfig {
+        encoder_channels: vec![MAX_CHANNELS; 5],
+        decoder_channels: vec![MAX_CHANNELS; 4],
+        ..EstimatorConfig::default()
+    };
+    let err = heavy.validate().unwrap_err().to_string();
+    assert!(err.contains("parameters exceed the limit"), "{err}");
+}

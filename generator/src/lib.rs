@@ -117,6 +117,34 @@ pub const MAX_RESOLUTION: usize = 1024;
 pub const BASE_RESOLUTION: usize = 4;
 /// Channel cap of the channel table (StyleGAN2 `channel_max`).
 pub const MAX_CHANNELS: usize = 512;
+/// Upper limits of the architecture fields, checked by [`GeneratorConfig::validate`] before any
+/// weight is allocated, so that a corrupt or hostile `gan.json` (say `latent_dim: 1e9`) is an
+/// error naming the field instead of an allocation that aborts the process. Each is several
+/// times the reference's value (docs/robustness.md, "Limits"); together they bound a model to
+/// a few hundred million parameters.
+pub mod limits {
+    /// Largest channel multiplier (×4: 2048 channels where the reference has 512).
+    pub const MAX_CHANNEL_MULTIPLIER: f64 = 4.0;
+    /// Largest dimension of z and w (the reference: 512).
+    pub const MAX_LATENT_DIM: usize = 2048;
+    /// Most mapping layers (the reference: 2; StyleGAN2: 8).
+    pub const MAX_MAPPING_DEPTH: usize = 16;
+    /// Most channels of F (the reference: 32).
+    pub const MAX_FEATURE_CHANNELS: usize = 256;
+    /// Widest hidden layer of M (the reference: 64).
+    pub const MAX_RELIGHT_HIDDEN: usize = 1024;
+    /// Most layers of M (the reference: 8).
+    pub const MAX_RELIGHT_LAYERS: usize = 32;
+    /// Most Phong lobes of M's light input (the default: 5).
+    pub const MAX_RELIGHT_LOBES: usize = 32;
+    /// Largest minibatch-stddev group and channel count (the reference: 4 and 1).
+    pub const MAX_MBSTD: usize = 64;
+    /// Most channels of a spatial G's local latents (the default: 32).
+    pub const MAX_LOCAL_DIM: usize = 1024;
+    /// Most 1×1 layers of a spatial G's local input (the default: 2).
+    pub const MAX_LOCAL_LAYERS: usize = 16;
+}
+
 /// Default side of a spatial G's sampled materials, in texels: 512², the smallest texture size
 /// renderers commonly take for a surface filling a view (any multiple of the cell works).
 pub const DEFAULT_SPATIAL_SAMPLE_SIDE: usize = 512;
@@ -205,8 +233,12 @@ impl GeneratorConfig {
                 self.channel_multiplier
             );
         }
-        if self.mapping_depth == 0 {
-            bail!("mapping depth must be at least 1");
+        if self.channel_multiplier > limits::MAX_CHANNEL_MULTIPLIER {
+            bail!(
+                "channel multiplier {} exceeds the limit of {}",
+                self.channel_multiplier,
+                limits::MAX_CHANNEL_MULTIPLIER
+            );
         }
         if self.relight_layers < 2 {
             bail!(
@@ -214,15 +246,41 @@ impl GeneratorConfig {
                 self.relight_layers
             );
         }
-        for (name, v) in [
-            ("latent_dim", self.latent_dim),
-            ("feature_channels", self.feature_channels),
-            ("relight_hidden", self.relight_hidden),
-            ("mbstd_group_size", self.mbstd_group_size),
-            ("mbstd_channels", self.mbstd_channels),
+        for (name, v, max) in [
+            (
+                "mapping_depth",
+                self.mapping_depth,
+                limits::MAX_MAPPING_DEPTH,
+            ),
+            ("latent_dim", self.latent_dim, limits::MAX_LATENT_DIM),
+            (
+                "feature_channels",
+                self.feature_channels,
+                limits::MAX_FEATURE_CHANNELS,
+            ),
+            (
+                "relight_hidden",
+                self.relight_hidden,
+                limits::MAX_RELIGHT_HIDDEN,
+            ),
+            (
+                "relight_layers",
+                self.relight_layers,
+                limits::MAX_RELIGHT_LAYERS,
+            ),
+            (
+                "relight_lobes (count)",
+                self.relight_lobes.len().max(1),
+                limits::MAX_RELIGHT_LOBES,
+            ),
+            ("mbstd_group_size", self.mbstd_group_size, limits::MAX_MBSTD),
+            ("mbstd_channels", self.mbstd_channels, limits::MAX_MBSTD),
         ] {
             if v == 0 {
                 bail!("{name} must be at least 1");
+            }
+            if v > max {
+                bail!("{name} {v} exceeds the limit of {max}");
             }
         }
         for (name, v) in [
@@ -319,7 +377,7 @@ impl GeneratorConfig {
     pub fn cells_for(&self, size: usize) -> Result<usize> {
         let cell = self.cell_size();
         match &self.spatial {
-            Some(_) if size > 0 && size % cell == 0 => Ok(size / cell),
+            Some(_) if size > 0 && size.is_multiple_of(cell) => Ok(size / cell),
             Some(_) => bail!(
                 "a material side of {size} texels is not possible: this spatial generator makes \
                  sides that are positive multiples of its cell of {cell} texels \

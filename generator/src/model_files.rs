@@ -371,4 +371,34 @@ mod tests {
             "{err}"
         );
     }
+
+    #[test]
+    fn an_oversized_architecture_is_refused_before_any_allocation() -> anyhow::Result<()> {
+        let dir = tempfile::tempdir()?;
+        GanModel::new(&tiny(), 7, &Device::Cpu)?.save(dir.path(), serde_json::Value::Null)?;
+        let path = dir.path().join(GAN_MANIFEST_FILE);
+        let original: serde_json::Value = serde_json::from_slice(&std::fs::read(&path)?)?;
+        // Each would ask for terabytes if it reached the weight allocation.
+        for (field, value) in [
+            ("latent_dim", serde_json::json!(1_000_000_000u64)),
+            ("relight_hidden", serde_json::json!(1_000_000)),
+            ("channel_multiplier", serde_json::json!(1e6)),
+            ("feature_channels", serde_json::json!(100_000)),
+        ] {
+            let mut manifest = original.clone();
+            manifest["architecture"][field] = value;
+            std::fs::write(&path, serde_json::to_vec(&manifest)?)?;
+            let err = GanModel::load(dir.path(), &Device::Cpu)
+                .unwrap_err()
+                .to_string();
+            let name = field.replace('_', " ");
+            assert!(
+                err.contains("gan.json")
+                    && (err.contains(field) || err.contains(&name))
+                    && err.contains("limit"),
+                "{field}: {err}"
+            );
+        }
+        Ok(())
+    }
 }

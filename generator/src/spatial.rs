@@ -60,11 +60,18 @@ impl Default for SpatialConfig {
 impl SpatialConfig {
     /// Checks every field; the error names it.
     pub fn validate(&self) -> Result<()> {
-        if self.local_dim == 0 {
-            bail!("spatial.local_dim must be at least 1");
+        use crate::limits::{MAX_LOCAL_DIM, MAX_LOCAL_LAYERS};
+        if !(1..=MAX_LOCAL_DIM).contains(&self.local_dim) {
+            bail!(
+                "spatial.local_dim {} must be in 1 … {MAX_LOCAL_DIM}",
+                self.local_dim
+            );
         }
-        if self.layers == 0 {
-            bail!("spatial.layers must be at least 1");
+        if !(1..=MAX_LOCAL_LAYERS).contains(&self.layers) {
+            bail!(
+                "spatial.layers {} must be in 1 … {MAX_LOCAL_LAYERS}",
+                self.layers
+            );
         }
         if let Some(t) = self.texel_size
             && !(t.is_finite() && t > 0.0)
