@@ -349,6 +349,17 @@ pub fn read_manifest(path: &Path) -> Result<MapManifest> {
         }
     }
     let spec = PluginSpec::parse(&manifest.brdf).map_err(|e| bad(format!("field 'brdf': {e}")))?;
+    if !manifest.args.is_empty() {
+        // An unknown model is the problem to report, not its arguments.
+        let known = crate::registry::registered_names()?;
+        if !known.contains(&spec.name.as_str()) {
+            return Err(bad(format!(
+                "field 'brdf': unknown BRDF model '{}'; registered models: {}",
+                spec.name,
+                known.join(", ")
+            )));
+        }
+    }
     let spelled: BTreeMap<String, f64> = spec.values.into_iter().collect();
     if !manifest.args.is_empty() && manifest.args != spelled {
         return Err(bad(format!(
@@ -372,6 +383,15 @@ fn load_map(
         entry.exr.as_ref().map(path_of),
     );
     for path in png.iter().chain(&exr) {
+        if path.exists() && !path.is_file() {
+            return Err(Error::file(
+                path,
+                format!(
+                    "is not a file (a folder?): material.json lists it as map '{}'",
+                    entry.name
+                ),
+            ));
+        }
         if !path.is_file() {
             let hint = if Some(path) == exr.as_ref() && png.is_some() {
                 " (to load the PNG instead, remove this map's \"exr\" entry from material.json)"

@@ -22,8 +22,17 @@ pub const ALPHA_MIN: f64 = 1e-4;
 
 /// GGX α from perceptual roughness: `α = max(roughness², ALPHA_MIN)` (the mapping is fixed
 /// project-wide and locked by the goldens).
+///
+/// The derivative is the subgradient chosen on purpose: `2·roughness` where `roughness² >
+/// ALPHA_MIN`, and 0 where the floor holds, ties included, as in Dr.Jit's `maximum`. A plain
+/// `maximum` splits a tie's gradient in half, and in f32 the tie is no corner case:
+/// roughness 0.01 squares to exactly the f32 value of 1e-4, where half the unclamped
+/// derivative of a render is about −7e7.
 pub fn alpha_from_roughness(roughness: &Tensor) -> Result<Tensor> {
-    Ok(roughness.sqr()?.maximum(ALPHA_MIN)?)
+    let squared = roughness.sqr()?;
+    let floor = squared.ones_like()?.affine(ALPHA_MIN, 0.0)?;
+    // `where_cond` sends the gradient to the selected branch only.
+    Ok(squared.gt(ALPHA_MIN)?.where_cond(&squared, &floor)?)
 }
 
 /// GGX normal distribution D(h) from `cos_h = n·h`, `sin2_h = |n × h|²` and α (all

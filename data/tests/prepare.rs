@@ -363,3 +363,32 @@ fn prepare_reject_non_square_and_simulated_truth() {
     }
     assert!(evaluation.table().contains("wood"));
 }
+
+#[test]
+fn a_folder_with_photos_only_in_sub_folders_is_an_error_naming_them() {
+    let dir = tempfile::tempdir().unwrap();
+    let photos = dir.path().join("photos");
+    for sub in ["leather", "wood"] {
+        std::fs::create_dir_all(photos.join(sub)).unwrap();
+        let image = DynamicImage::ImageRgb8(flash_photo(64, 64, 32.0, 32.0));
+        std::fs::write(
+            photos.join(sub).join("a.png"),
+            encode(&image, ImageFormat::Png),
+        )
+        .unwrap();
+    }
+    let err = prepare(&photos, &dir.path().join("data"), &options())
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("leather, wood") && err.contains("--photos") && err.contains("no photos"),
+        "{err}"
+    );
+    // And an empty folder says that it is empty.
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let err = prepare(&empty, &dir.path().join("data2"), &options())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("holds no photos"), "{err}");
+}

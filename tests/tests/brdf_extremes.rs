@@ -6,9 +6,11 @@
 //! The model-generic cases are the conformance kit's
 //! ([`photomat_core::testing::check_finite_at_extremes`]: 10 000 seeded cases of 16 texels per
 //! model, through `eval` and the renderer); the height adapter's steep reliefs are checked
-//! here with proptest (10 000 cases).
+//! here with proptest (10 000 cases), and the α floor's derivative is the chosen subgradient
+//! in f32 (0 at a tie, never half the unclamped one).
 
 use candle_core::{DType, Device, Tensor};
+use photomat_core::microfacet::{ALPHA_MIN, alpha_from_roughness};
 use photomat_core::testing::{check_finite_at_extremes, check_finite_with_gradients};
 use photomat_core::{Highlight, MaterialMaps, render_radiance};
 use photomat_tests::{model, models_under_test};
@@ -34,8 +36,51 @@ fn every_model_eval_and_render_are_finite_at_extremes() {
     }
 }
 
+/// dα/dr of [`alpha_from_roughness`] at each f32 roughness, by autodiff.
+fn alpha_gradient(roughness: &[f32]) -> Vec<f32> {
+    let r = candle_core::Var::from_tensor(
+        &Tensor::from_vec(roughness.to_vec(), (1, 1, 1, roughness.len()), &Device::Cpu).unwrap(),
+    )
+    .unwrap();
+    let grads = alpha_from_roughness(r.as_tensor())
+        .unwrap()
+        .sum_all()
+        .unwrap()
+        .backward()
+        .unwrap();
+    grads
+        .get(r.as_tensor())
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1()
+        .unwrap()
+}
+
+#[test]
+fn alpha_floor_tie_has_zero_gradient_in_f32() {
+    // 0.01 squares to exactly the f32 value of the floor 1e-4: the floor holds, dα/dr = 0.
+    let tie = 0.01f32;
+    assert_eq!(tie * tie, ALPHA_MIN as f32);
+    let above = f32::from_bits(tie.to_bits() + 1);
+    let below = f32::from_bits(tie.to_bits() - 1);
+    assert_eq!(
+        alpha_gradient(&[below, tie, above]),
+        [0.0, 0.0, 2.0 * above]
+    );
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(CASES))]
+
+    #[test]
+    fn alpha_gradient_is_the_chosen_subgradient(
+        r in prop_oneof![Just(0.0f32), Just(0.01f32), 0.0f32..=1.0, 0.009f32..0.011],
+    ) {
+        let g = alpha_gradient(&[r])[0];
+        let expected = if r * r > ALPHA_MIN as f32 { 2.0 * r } else { 0.0 };
+        prop_assert_eq!(g, expected);
+    }
 
     #[test]
     fn height_adapter_is_finite_for_steep_reliefs(

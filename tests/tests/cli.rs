@@ -468,6 +468,12 @@ fn cli_brdf_eval_rejects_malformed_cases() {
         json!({"cases": [{"wi": [0, 0, 1], "wo": [0, 0, 1], "params": {"roughness": [0.1, 0.2]}}]}),
     );
     assert!(err.contains("'roughness' has 1 channel(s), got 2"), "{err}");
+    let err =
+        run(json!({"cases": [{"wi": [0, 0, 1], "wo": [0, 0, 1], "params": {"roughness": -5}}]}));
+    assert!(
+        err.contains("'roughness' has the value -5, outside its range [0, 1]"),
+        "{err}"
+    );
     let err = run(json!({"cases": [{"wi": [0, 0, 1], "wo": [0, 0, 0]}]}));
     assert!(err.contains("'wo'"), "{err}");
     let err = run(json!({"cases": []}));

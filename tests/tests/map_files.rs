@@ -419,6 +419,35 @@ fn map_files_missing_map_file_names_the_file() {
 }
 
 #[test]
+fn map_files_a_folder_in_place_of_a_map_file_is_not_called_missing() {
+    let (dir, _, _) = saved("ggx", &SaveOptions::default());
+    let exr = dir.path().join("diffuse.exr");
+    fs::remove_file(&exr).unwrap();
+    fs::create_dir(&exr).unwrap();
+    let (path, reason) = load_error(dir.path());
+    assert_eq!(path, exr);
+    assert!(
+        reason.contains("is not a file") && !reason.contains("missing"),
+        "{reason}"
+    );
+}
+
+#[test]
+fn map_files_an_unknown_model_with_args_names_the_model() {
+    let (dir, _, _) = saved("height(ggx, scale=0.05)", &SaveOptions::default());
+    let mut m = manifest_json(dir.path());
+    // The args no longer match the spelling either; the unknown name is what to fix first.
+    m["brdf"] = "hieght(ggx)".into();
+    write_manifest_json(dir.path(), &m);
+    let (path, reason) = load_error(dir.path());
+    assert_eq!(path, dir.path().join(MANIFEST_FILE));
+    assert!(
+        reason.contains("unknown BRDF model 'hieght'") && !reason.contains("disagrees"),
+        "{reason}"
+    );
+}
+
+#[test]
 fn map_files_png_normals_are_renormalised() {
     let (dir, _, maps) = saved("lambert", &SaveOptions::default());
     drop_exr_entries(dir.path());

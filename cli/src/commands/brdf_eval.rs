@@ -320,6 +320,14 @@ fn validate(case: &CaseIn, specs: &[ParamSpec]) -> anyhow::Result<Case> {
             if let Some(v) = values.iter().find(|v| !v.is_finite()) {
                 bail!("parameter '{}' has a non-finite value {v}", spec.name);
             }
+            let (lo, hi) = (spec.range.0 as f64, spec.range.1 as f64);
+            if let Some(v) = values.iter().find(|v| !(lo..=hi).contains(*v)) {
+                bail!(
+                    "parameter '{}' has the value {v}, outside its range [{lo}, {hi}] \
+                     (`photomat brdfs` lists every map's range)",
+                    spec.name
+                );
+            }
             Ok(values)
         })
         .collect::<anyhow::Result<_>>()?;

@@ -134,6 +134,9 @@ pub fn prepare(photos: &Path, out: &Path, options: &PrepareOptions) -> Result<Pr
     let truth = SimulationTruth::find(&photo_dir)?;
 
     let files = list_files(&photo_dir)?;
+    if files.is_empty() {
+        return Err(no_files_error(photos, &photo_dir));
+    }
     let known = |f: &SourceFile| {
         index.photos.iter().any(|p| {
             p.source == f.key && p.source_bytes == f.bytes && p.source_modified == f.modified
@@ -191,11 +194,14 @@ pub fn prepare(photos: &Path, out: &Path, options: &PrepareOptions) -> Result<Pr
                 }
             }
         }
-        index.write(out)?;
+        let saved = index.write(out);
         if let Some(e) = fatal {
+            // The photo's write failed first (e.g. a full disk): that is the error to
+            // report; the index write that usually fails after it would hide it.
             bar.abandon();
             return Err(e);
         }
+        saved?;
     }
     bar.finish_and_clear();
     summary.seconds = start.elapsed().as_secs_f64();
@@ -231,6 +237,36 @@ fn check_compatible(existing: &DatasetIndex, out: &Path, options: &PrepareOption
         ));
     }
     Ok(())
+}
+
+/// The error for a photo folder without a file directly inside: naming its sub-folders,
+/// which `prepare` does not search, when it has some.
+fn no_files_error(photos: &Path, dir: &Path) -> Error {
+    let mut folders: Vec<String> = std::fs::read_dir(dir)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter(|e| e.path().is_dir() && !e.file_name().to_string_lossy().starts_with('.'))
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    folders.sort();
+    if folders.is_empty() {
+        return Error::file(photos, "holds no photos");
+    }
+    const LISTED: usize = 5;
+    let more = if folders.len() > LISTED {
+        format!(", … ({} in all)", folders.len())
+    } else {
+        String::new()
+    };
+    Error::file(
+        photos,
+        format!(
+            "holds no photos directly inside, only sub-folders ({}{more}), which are not \
+             searched: pass the folder that holds the photos as --photos",
+            folders[..folders.len().min(LISTED)].join(", ")
+        ),
+    )
 }
 
 /// Regular files directly inside `dir`, sorted by name; hidden files and the simulator's
