@@ -194,6 +194,28 @@ pub struct GeneratorConfig {
     /// unchanged.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub spatial: Option<SpatialConfig>,
+    /// StyleGAN2's per-pixel noise inputs ([`noise`]). Default true (the reference). False
+    /// leaves every layer's noise out, so that all texel-scale variation must come from the
+    /// latents (as in the spatial texture GANs, Jetchev et al. 2016 and Bergmann et al. 2017,
+    /// which have no noise inputs): the noise strength of the last 64² layer of the first
+    /// spatial CPU run grew to 0.29, a per-texel speckle that M turned into coloured dots
+    /// (docs/benchmarks.md, "Noise inputs"). Absent from older `gan.json` files, and not
+    /// written when true.
+    #[serde(
+        default = "noise_inputs_default",
+        skip_serializing_if = "is_noise_default"
+    )]
+    pub noise_inputs: bool,
+}
+
+/// Serde default of [`GeneratorConfig::noise_inputs`]: on, as before the option existed.
+fn noise_inputs_default() -> bool {
+    true
+}
+
+/// Whether `noise_inputs` has its default value (then `gan.json` omits it).
+fn is_noise_default(on: &bool) -> bool {
+    *on
 }
 
 impl Default for GeneratorConfig {
@@ -214,6 +236,7 @@ impl Default for GeneratorConfig {
             mbstd_group_size: 4,
             mbstd_channels: 1,
             spatial: None,
+            noise_inputs: true,
         }
     }
 }

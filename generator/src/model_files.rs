@@ -401,4 +401,45 @@ mod tests {
         }
         Ok(())
     }
+
+    #[test]
+    fn without_noise_inputs_the_noise_changes_nothing() -> anyhow::Result<()> {
+        use crate::NoiseInput;
+        let features = |noise_inputs: bool| -> anyhow::Result<(Tensor, Tensor)> {
+            let config = GeneratorConfig {
+                noise_inputs,
+                ..tiny()
+            };
+            let model = GanModel::new(&config, 7, &Device::Cpu)?;
+            // Fresh strengths are 0; give every layer's noise a visible weight.
+            for (name, var) in model.vars().data().lock().unwrap().iter() {
+                if name.ends_with("noise_strength") {
+                    var.set(&var.as_tensor().ones_like()?)?;
+                }
+            }
+            let z = model.latents(&[3])?;
+            let g = model.generator();
+            Ok((
+                g.forward(&z, 1.0, &NoiseInput::Random)?,
+                g.forward(&z, 1.0, &NoiseInput::Random)?,
+            ))
+        };
+        let diff = |(a, b): (Tensor, Tensor)| -> anyhow::Result<f32> {
+            Ok((a - b)?.abs()?.max_all()?.to_scalar::<f32>()?)
+        };
+        assert!(diff(features(true)?)? > 1e-3);
+        assert_eq!(diff(features(false)?)?, 0.0);
+        // gan.json keeps the option only when it is off, so older files read as before.
+        let json = |on: bool| {
+            serde_json::to_value(GeneratorConfig {
+                noise_inputs: on,
+                ..tiny()
+            })
+        };
+        assert!(json(true)?.get("noise_inputs").is_none());
+        assert_eq!(json(false)?["noise_inputs"], false);
+        let back: GeneratorConfig = serde_json::from_value(json(false)?)?;
+        assert!(!back.noise_inputs);
+        Ok(())
+    }
 }

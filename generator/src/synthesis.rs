@@ -387,6 +387,8 @@ impl Synthesis {
         let (b, _c, cells, _) = x.dims4()?;
         let shapes = self.noise_shapes_for_cells(b, cells);
         let noises: Vec<Option<Tensor>> = match noise {
+            // A generator without noise inputs ignores whatever noise it is given.
+            _ if !self.config.noise_inputs => vec![None; shapes.len()],
             NoiseInput::Zero => vec![None; shapes.len()],
             NoiseInput::Random => shapes
                 .iter()

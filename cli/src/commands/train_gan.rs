@@ -128,6 +128,12 @@ pub struct Args {
     #[arg(long)]
     pub spatial: bool,
 
+    /// Leave out StyleGAN2's per-pixel noise inputs: all variation then comes from the
+    /// latents (the local latents of a spatial generator), as in spatial texture GANs. On a
+    /// CPU-sized spatial run the learned noise became a per-texel speckle.
+    #[arg(long)]
+    pub no_noise: bool,
+
     /// Channels of the spatial generator's local latents (one vector per size/4 cell)
     /// [default: 32].
     #[arg(long, value_name = "N", requires = "spatial",
@@ -204,6 +210,7 @@ impl Args {
             highlight_prob: self.highlight_prob,
             light_mismatch: self.light_mismatch,
             relight_lobes: self.relight_lobes.clone().map(|l| l.0),
+            no_noise: self.no_noise,
             checkpoint_every: self.checkpoint_every,
             sample_every: self.sample_every,
             swd_every: self.swd_every,

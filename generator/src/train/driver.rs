@@ -87,6 +87,9 @@ pub struct GanSettings {
     /// Exponents of M's Phong-lobe light input ([`GeneratorConfig::relight_lobes`]; empty:
     /// the paper's M on F ‖ ω). Default for new runs [`DEFAULT_RELIGHT_LOBES`].
     pub relight_lobes: Option<Vec<f64>>,
+    /// Leave out the per-pixel noise inputs ([`GeneratorConfig::noise_inputs`]; `false`: not
+    /// asked for).
+    pub no_noise: bool,
     /// Steps between checkpoints ([`Cadence::checkpoint_every`]).
     pub checkpoint_every: Option<u64>,
     /// Steps between sample grids ([`Cadence::sample_every`]).
@@ -121,7 +124,13 @@ type FixedField = (
 );
 
 /// Every setting fixed at the start of a run, with its command-line flag.
-pub const RESUME_FIXED: [FixedField; 14] = [
+pub const RESUME_FIXED: [FixedField; 15] = [
+    (
+        "--no-noise",
+        "generator.noise_inputs",
+        |s| s.no_noise.then(|| "false".to_string()),
+        |c| c.generator.noise_inputs.to_string(),
+    ),
     (
         "--size",
         "generator.resolution",
@@ -574,6 +583,7 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
         channel_multiplier: settings.multiplier.unwrap_or(DEFAULT_MULTIPLIER),
         // A spatial G is translation-equivariant only with wrap-around padding.
         tileable: settings.tileable || settings.spatial,
+        noise_inputs: !settings.no_noise,
         spatial,
         latent_dim: settings.latent_dim.unwrap_or(defaults.latent_dim),
         relight_lr_multiplier: settings
