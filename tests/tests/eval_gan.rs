@@ -128,9 +128,42 @@ fn eval_gan_untrained_model_is_far_from_the_data() {
         &Device::Cpu,
     )
     .unwrap();
-    let fakes = model_swd(&model, &data, count, 1, &config, &mut |_, _| {})
+    let fakes = model_swd(&model, &data, count, 1, None, &config, &mut |_, _| {})
         .unwrap()
         .mean;
     eprintln!("SWD×1e3 real/real {floor:.1}, untrained model/real {fakes:.1}");
     assert!(fakes > 2.0 * floor, "model {fakes} vs floor {floor}");
+}
+
+#[test]
+fn size_generalisation_fakes_are_windows_of_larger_samples() {
+    use candle_core::Device;
+    use photomat_data::source::DatasetSource;
+    use photomat_generator::swd::model::relit_samples;
+    use photomat_generator::{GanModel, GeneratorConfig, SpatialConfig};
+
+    let dir = tempfile::tempdir().unwrap();
+    let config = GeneratorConfig {
+        tileable: true,
+        spatial: Some(SpatialConfig {
+            texel_size: Some(1.0 / 32.0),
+            ..SpatialConfig::default()
+        }),
+        ..photomat_tests::cli_fixtures::tiny_gan_config(32)
+    };
+    let data = DatasetSource::for_model(&simulated_dataset(dir.path(), 64), &config).unwrap();
+    let model = GanModel::new(&config, 5, &Device::Cpu).unwrap();
+    let fakes = |side| relit_samples(&model, &data, 3, 7, side, &mut |_| {});
+    let native = fakes(None).unwrap();
+    assert_eq!(native.dims(), [3, 3, 32, 32]);
+    // Side R is the default; a larger side gives windows of the same shape from other,
+    // larger materials (the same seeds, so equal only if the size did not matter at all).
+    let same = (fakes(Some(32)).unwrap() - &native).unwrap().abs().unwrap();
+    assert_eq!(same.max_all().unwrap().to_scalar::<f32>().unwrap(), 0.0);
+    let larger = fakes(Some(96)).unwrap();
+    assert_eq!(larger.dims(), [3, 3, 32, 32]);
+    let moved = (larger - &native).unwrap().abs().unwrap().max_all().unwrap();
+    assert!(moved.to_scalar::<f32>().unwrap() > 0.0);
+    let err = fakes(Some(16)).unwrap_err().to_string();
+    assert!(err.contains("smaller than the model's 32×32"), "{err}");
 }

@@ -56,6 +56,14 @@ pub struct Args {
     #[arg(long, value_name = "NAME", value_parser = parse_detector)]
     pub detector: Option<DetectorKind>,
 
+    /// Side of the materials the fakes are cut from (a spatial model): each fake is an R×R
+    /// window of its own material of N×N texels, which checks that the model's local
+    /// statistics do not change with the sample size [default: R, the training windows].
+    /// With it the command measures the SWD only (no light-following check).
+    #[arg(long, value_name = "N",
+          value_parser = clap::value_parser!(u32).range(1..=4096))]
+    pub sample_size: Option<u32>,
+
     /// Print the result as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -85,6 +93,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         &data,
         count,
         args.seed,
+        args.sample_size.map(|n| n as usize),
         &SwdConfig::default(),
         &mut |phase, done| match phase {
             EvalPhase::Fakes => {
@@ -107,6 +116,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     })?;
     let following = match model.config().spatial {
         None => None,
+        Some(_) if args.sample_size.is_some() => None,
         Some(_) => {
             let detector = args
                 .detector
@@ -142,6 +152,7 @@ fn print_report(
             "gan": args.gan.display().to_string(),
             "data": args.data.display().to_string(),
             "resolution": side,
+            "sample_size": args.sample_size.map_or(side, |n| n as usize),
             "count": count,
             "seed": args.seed,
             "levels": levels,
@@ -152,10 +163,14 @@ fn print_report(
         writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
         return Ok(());
     }
+    let cut = match args.sample_size {
+        Some(n) => format!(", windows of {n}×{n} samples"),
+        None => String::new(),
+    };
     writeln!(
         out,
         "SWD ×10³ between {count} relit samples of '{}' and {count} crops of '{}' \
-         ({side}×{side}, seed {}; lower is closer):",
+         ({side}×{side}{cut}, seed {}; lower is closer):",
         args.gan.display(),
         args.data.display(),
         args.seed

@@ -43,6 +43,12 @@ pub fn fake_seeds(seed: u64, count: usize) -> Vec<u64> {
 /// `count` relit samples of `model` under lights of `data`, drawn from `seed` (module docs),
 /// generated [`EVAL_BATCH`] at a time; `progress` receives the number finished so far.
 ///
+/// `sample_side` (a spatial model; `None`: R) makes each fake the top-left R×R window of a
+/// material of that side: the size-generalisation check of an any-size G. Its samples are
+/// periodic and G is translation-equivariant, so any window is distributed like this one;
+/// each window comes from its own material (its own z), as at side R. Fewer samples are
+/// generated at once at larger sides so that memory stays that of one batch at R.
+///
 /// # Shapes
 /// → (count, 3, R, R), f32, encoded space.
 pub fn relit_samples(
@@ -50,21 +56,29 @@ pub fn relit_samples(
     data: &dyn TrainingData,
     count: usize,
     seed: u64,
+    sample_side: Option<usize>,
     progress: &mut dyn FnMut(usize),
 ) -> Result<Tensor> {
     let r = model.config().resolution;
+    let side = sample_side.unwrap_or(r);
+    if side < r {
+        bail!("samples of side {side} are smaller than the model's {r}×{r} windows");
+    }
+    let batch = (EVAL_BATCH * r * r / (side * side)).max(1);
     let seeds = fake_seeds(seed, count);
     let lights = data.fake_lights(count, seed ^ LIGHT_KEY)?;
-    let mut batches = Vec::with_capacity(count.div_ceil(EVAL_BATCH));
-    for (i, (seeds, lights)) in seeds
-        .chunks(EVAL_BATCH)
-        .zip(lights.chunks(EVAL_BATCH))
-        .enumerate()
-    {
-        let features = model.features_for_seeds(seeds, 1.0)?;
+    let mut batches = Vec::with_capacity(count.div_ceil(batch));
+    let mut done = 0;
+    for (seeds, lights) in seeds.chunks(batch).zip(lights.chunks(batch)) {
+        let features = model
+            .features_for_seeds_at(seeds, 1.0, side)?
+            .narrow(2, 0, r)?
+            .narrow(3, 0, r)?
+            .contiguous()?;
         let omega = omega_for_placements(lights, r, model.device())?;
         batches.push(model.relight().forward(&features, &omega)?);
-        progress((i * EVAL_BATCH + seeds.len()).min(count));
+        done += seeds.len();
+        progress(done);
     }
     Tensor::cat(&batches, 0)
 }
@@ -94,19 +108,21 @@ pub fn real_crops(
 }
 
 /// The SWD between `count` relit samples of `model` and `count` real crops of `data`, all
-/// drawn from `seed` (module docs). `progress(phase, done)` reports each finished batch.
+/// drawn from `seed` (module docs); the fakes are windows of samples of `sample_side`
+/// ([`relit_samples`]). `progress(phase, done)` reports each finished batch.
 pub fn model_swd(
     model: &GanModel,
     data: &dyn TrainingData,
     count: usize,
     seed: u64,
+    sample_side: Option<usize>,
     config: &SwdConfig,
     progress: &mut dyn FnMut(EvalPhase, usize),
 ) -> Result<SwdReport> {
     if count == 0 {
         bail!("the SWD needs at least one image per set, got a count of 0");
     }
-    let fakes = relit_samples(model, data, count, seed, &mut |n| {
+    let fakes = relit_samples(model, data, count, seed, sample_side, &mut |n| {
         progress(EvalPhase::Fakes, n)
     })?;
     let reals = real_crops(data, count, seed, model.device(), &mut |n| {

@@ -527,6 +527,7 @@ impl GanTraining {
             data,
             count as usize,
             self.trainer.config().seed ^ SWD_SEED_KEY,
+            None,
             &SwdConfig::default(),
             &mut |_, _| progress(GanEvent::SwdProgress),
         )
