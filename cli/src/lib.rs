@@ -64,6 +64,8 @@ enum Command {
     Brdfs(commands::brdfs::Args),
     /// Render a material folder under the collocated flash (one image or an orbit sheet).
     Render(commands::render::Args),
+    /// The spread of material maps (normal angles, per-map std) of material folders.
+    MapStats(commands::map_stats::Args),
     /// Evaluate a model at given directions and parameters; JSON values and gradients.
     BrdfEval(commands::brdf_eval::Args),
     /// Simulate phone-flash photos of procedural materials, with their ground truth.
@@ -92,6 +94,7 @@ impl Command {
             Command::Demo(args) => commands::demo::run(args, out),
             Command::Brdfs(args) => commands::brdfs::run(args, out),
             Command::Render(args) => commands::render::run(args, out),
+            Command::MapStats(args) => commands::map_stats::run(args, out),
             Command::BrdfEval(args) => commands::brdf_eval::run(args, out),
             Command::Simulate(args) => commands::simulate::run(args, out),
             Command::Prepare(args) => commands::prepare::run(args, out),

@@ -26,6 +26,7 @@ pub mod image_io;
 pub mod lights;
 pub mod lobes;
 pub mod map_files;
+pub mod map_stats;
 pub mod maps;
 pub mod microfacet;
 pub mod model;

@@ -492,3 +492,50 @@ fn cli_brdf_eval_rejects_malformed_cases() {
     ]);
     assert!(err.contains("/nonexistent/cases.json"), "{err}");
 }
+
+#[test]
+fn map_stats_measures_the_normal_spread_of_a_derived_normal() {
+    // Heights h = ½ + A sin(2π x / N) along x: the height adapter's wrap-around central
+    // difference g = (h[i+1] − h[i−1]) / (2·texel) tilts texel i's normal by atan(scale·|g|)
+    // around the mean normal +z (the tilts cancel in pairs); the heights' std is A/√2.
+    let brdf = model("height(ggx, scale=1)");
+    let (size, amplitude) = (16, 0.05);
+    let texel = 1.0 / size as f64;
+    let mut maps = MaterialMaps::defaults(brdf.params(), 1, size, DType::F32, &Device::Cpu)
+        .unwrap()
+        .with_texel_size(Some(texel));
+    let h = |x: usize| 0.5 + amplitude * (2.0 * PI * (x % size) as f64 / size as f64).sin();
+    let heights: Vec<f32> = (0..size * size).map(|i| h(i % size) as f32).collect();
+    maps.insert(
+        "height",
+        Tensor::from_vec(heights, (1, 1, size, size), &Device::Cpu).unwrap(),
+    );
+    let dir = tempfile::tempdir().unwrap();
+    save_maps(
+        &dir.path().join("wave"),
+        brdf.as_ref(),
+        &maps,
+        &SaveOptions::default(),
+    )
+    .unwrap();
+    let out = photomat(&["map-stats", path_str(dir.path()), "--json"]).unwrap();
+    let report: Value = serde_json::from_str(&out).unwrap();
+    let spread = &report["materials"][0]["spread"];
+    let height = spread["maps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["name"] == "height")
+        .unwrap();
+    let std = height["std"][0].as_f64().unwrap();
+    assert!((std - amplitude / 2f64.sqrt()).abs() < 1e-6, "{std}");
+    let tilts: Vec<f64> = (0..size)
+        .map(|x| ((h(x + 1) - h(x + size - 1)) / (2.0 * texel)).abs().atan())
+        .collect();
+    let rms = (tilts.iter().map(|t| t * t).sum::<f64>() / size as f64)
+        .sqrt()
+        .to_degrees();
+    let measured = spread["normal_angle_rms_deg"].as_f64().unwrap();
+    assert!((measured - rms).abs() < 1e-3, "{measured}° vs {rms}°");
+    assert!(spread["normal_mean_tilt_deg"].as_f64().unwrap() < 1e-3);
+}

@@ -162,7 +162,12 @@ fn size_generalisation_fakes_are_windows_of_larger_samples() {
     assert_eq!(same.max_all().unwrap().to_scalar::<f32>().unwrap(), 0.0);
     let larger = fakes(Some(96)).unwrap();
     assert_eq!(larger.dims(), [3, 3, 32, 32]);
-    let moved = (larger - &native).unwrap().abs().unwrap().max_all().unwrap();
+    let moved = (larger - &native)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap();
     assert!(moved.to_scalar::<f32>().unwrap() > 0.0);
     let err = fakes(Some(16)).unwrap_err().to_string();
     assert!(err.contains("smaller than the model's 32×32"), "{err}");

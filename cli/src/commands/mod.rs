@@ -6,6 +6,7 @@ pub mod brdfs;
 pub mod demo;
 pub mod eval_detector;
 pub mod eval_gan;
+pub mod map_stats;
 pub mod prepare;
 pub mod relight;
 pub mod render;
