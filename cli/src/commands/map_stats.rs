@@ -71,10 +71,10 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         "normal rms °",
         header
             .iter()
-            .map(|h| format!("{h:>14}"))
+            .map(|h| format!(" {h:>14}"))
             .collect::<String>()
     )?;
-    let cell = |v: Option<f64>| v.map_or(format!("{:>14}", "–"), |v| format!("{v:>14.4}"));
+    let cell = |v: Option<f64>| v.map_or(format!(" {:>14}", "–"), |v| format!(" {v:>14.4}"));
     for (folder, _, spread) in &rows {
         let cells: String = names.iter().map(|n| cell(map_std(spread, n))).collect();
         writeln!(

@@ -7,11 +7,14 @@
 //! | name     | file        | what it does                                                        |
 //! |----------|-------------|---------------------------------------------------------------------|
 //! | `paper`  | `paper.rs`  | exactly the paper: centroid of the above-mean min(R,G,B) intensity  |
-//! | `robust` | `robust.rs` | fits the collocated-flash falloff, specular lobe, vignetting and ambient light (default) |
+//! | `robust` | `robust.rs` | fits the collocated-flash falloff, specular lobe, vignetting and ambient light; the paper's centroid as a second opinion (default) |
 //!
-//! `robust` is the default: on simulated photos its mean error is about half the paper's
-//! (0.75 % against 1.41 % of the width on `photomat simulate` output; per-family numbers in
-//! `robust.rs`, test `robust_beats_paper_on_simulated_photos`).
+//! `robust` is the default: its mean error is below the paper's both on photos of photomat's
+//! simulator (0.82 % against 1.71 % of the width, 320 photos) and on photos that Mitsuba
+//! rendered from real texture photos with a tilted perspective camera and an offset flash
+//! (1.76 % against 1.99 %, largest 4.8 %; `validation/`, docs/benchmarks.md, "Highlight
+//! detectors on independent photos"). It takes the paper's centroid as a second opinion when
+//! its own fit is far from it and implausible (`robust.rs`, "Second opinion").
 //!
 //! Both take a display-encoded (gamma 2.2) image in [0, 1] with 1, 3 or 4 channels (alpha is
 //! ignored) and return a [`Detection`]: the highlight in continuous pixel coordinates (pixel
@@ -65,7 +68,8 @@ pub struct Detection {
     /// Height of the image, in pixels.
     pub height: usize,
     pub status: DetectionStatus,
-    /// Why the detector fell back to the centre; `None` when it detected.
+    /// Why the detector fell back to the centre, or (for a detection) which of its estimates
+    /// it chose and why when it had to choose; `None` for a plain detection.
     pub reason: Option<String>,
 }
 
