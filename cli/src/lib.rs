@@ -82,6 +82,8 @@ enum Command {
     Relight(commands::relight::Args),
     /// Train the map estimator E for a named BRDF model against a frozen GAN.
     TrainEstimator(commands::train_estimator::Args),
+    /// Fit the maps of a named BRDF model to one phone flash photo.
+    Capture(commands::capture::Args),
     /// Sample materials from a trained model: maps, renders, contact sheet, glTF/MaterialX.
     Sample(commands::sample::Args),
     /// Time whole training and sampling steps (JSON), for comparison with PyTorch.
@@ -94,6 +96,7 @@ impl Command {
             Command::Demo(args) => commands::demo::run(args, out),
             Command::Brdfs(args) => commands::brdfs::run(args, out),
             Command::Render(args) => commands::render::run(args, out),
+            Command::Capture(args) => commands::capture::run(args, out),
             Command::MapStats(args) => commands::map_stats::run(args, out),
             Command::BrdfEval(args) => commands::brdf_eval::run(args, out),
             Command::Simulate(args) => commands::simulate::run(args, out),

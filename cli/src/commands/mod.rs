@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod brdf_eval;
 pub mod brdfs;
+pub mod capture;
 pub mod demo;
 pub mod eval_detector;
 pub mod eval_gan;

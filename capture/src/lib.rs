@@ -1,0 +1,276 @@
+//! # photomat-capture
+//!
+//! One phone flash photo → material maps for a BRDF model chosen by name: the library
+//! behind `photomat capture` (docs/capture.md).
+//!
+//! The photo is decoded, oriented and centre-cropped to a square of `size` texels as
+//! `photomat prepare` does ([`photomat_data::dataset::photo::prepare_photo`]), its flash
+//! highlight is found by the default detector (or given), and the maps are optimised through
+//! the differentiable flash renderer so that their render under that flash matches the photo
+//! (direct optimisation from constant maps, the baseline of single-image capture in
+//! Deschaintre et al. 2018 and MaterialGAN, Guo et al. 2020). The geometry is the training
+//! data's: the photo is a square of side 2 world units seen from straight above, with the
+//! flash at height 1 above the highlight (docs/conventions.md). The photo's unknown exposure
+//! is a fitted global gain.
+//!
+//! The fit minimises, over the raw (pre-decoding) maps `θ` and the log gain `g`,
+//!
+//! `L = mean |encode(e^g · render(decode(θ))) − photo| + λ · mean |∇θ|`
+//!
+//! in the display-encoded domain (what the photo stores; the gamma compresses the highlight
+//! as the eye does), with a total-variation prior of weight λ on the raw maps, which keeps
+//! what a single light cannot separate (e.g. roughness far from the highlight) smooth rather
+//! than noisy. Adam ([`photomat_train::Adam`]) steps all of them.
+//!
+//! Not yet: the generator's prior (inverting M∘G, then decoding with E, before this
+//! refinement), a `--fov` for tilted or perspective photos, and fitted vignetting and
+//! ambient terms.
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use candle_core::{DType, Device, Tensor, Var};
+use photomat_core::flash::PHOTO_SIDE;
+use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
+use photomat_core::map_files::{SaveOptions, save_maps};
+use photomat_core::render::render_radiance_with;
+use photomat_core::sheet::grid;
+use photomat_core::{Brdf, FlashGeometry, Highlight, MaterialMaps, encode_display};
+use photomat_data::dataset::photo::{Framing, prepare_photo};
+use photomat_data::highlight::{DetectionStatus, DetectorKind};
+use photomat_train::{Adam, AdamConfig};
+use serde::Serialize;
+
+/// Smallest and largest side of a capture: below 16 texels there is no highlight to fit,
+/// above 2048 one step's render and gradients exceed a few GB.
+pub const SIZE_RANGE: (usize, usize) = (16, 2048);
+
+/// How a photo is fitted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CaptureOptions {
+    /// Side of the square the photo is resampled to, and of the maps. Default 256.
+    pub size: usize,
+    /// Adam steps. Default 400.
+    pub steps: usize,
+    /// Adam learning rate on the raw maps and the log gain. Default 0.05 (raw maps are
+    /// unconstrained and decode through tanh-like maps, so steps of 0.05 move a map by a few
+    /// % of its range).
+    pub lr: f64,
+    /// Weight λ of the total-variation prior on the raw maps. Default 0.002.
+    pub smoothness: f64,
+    /// The highlight in continuous pixel `(row, col)` of the square image, instead of
+    /// detecting it.
+    pub highlight: Option<(f64, f64)>,
+}
+
+impl Default for CaptureOptions {
+    fn default() -> Self {
+        Self {
+            size: 256,
+            steps: 400,
+            lr: 0.05,
+            smoothness: 0.002,
+            highlight: None,
+        }
+    }
+}
+
+/// The result of [`capture`].
+#[derive(Clone)]
+pub struct Capture {
+    /// The model the maps are for.
+    pub brdf: Brdf,
+    /// The fitted maps (1, C, N, N), with their texel size.
+    pub maps: MaterialMaps,
+    /// The photo as fitted: (1, 3, N, N) display values.
+    pub photo: Tensor,
+    /// The maps' render under the photo's flash, with the fitted gain: (1, 3, N, N).
+    pub render: Tensor,
+    /// Where the flash was, and how it was found.
+    pub highlight: HighlightUsed,
+    /// The fitted exposure gain.
+    pub gain: f64,
+    /// Loss after every step.
+    pub losses: Vec<f64>,
+    /// Wall seconds of the fit.
+    pub seconds: f64,
+}
+
+/// The highlight a capture used.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct HighlightUsed {
+    /// Continuous pixel `(row, col)` in the square image.
+    pub pixel: (f64, f64),
+    /// `given`, or the detector's name.
+    pub source: String,
+    /// The detector's status or reason, if it said one.
+    pub note: Option<String>,
+}
+
+/// Fits maps of `brdf` to the flash photo `bytes` (a JPEG or PNG file's content; `name` is
+/// used in errors). `progress(step, loss)` is called after every step.
+pub fn capture(
+    bytes: &[u8],
+    name: &str,
+    brdf: &Brdf,
+    options: &CaptureOptions,
+    progress: &mut dyn FnMut(usize, f64),
+) -> anyhow::Result<Capture> {
+    let (lo, hi) = SIZE_RANGE;
+    if !(lo..=hi).contains(&options.size) {
+        bail!("capture size {} is outside {lo} … {hi}", options.size);
+    }
+    let n = options.size;
+    let framing = Framing {
+        size: n,
+        reject_non_square: false,
+    };
+    let prepared = prepare_photo(bytes, framing).map_err(|r| anyhow::anyhow!("{name}: {}", r.0))?;
+    let highlight = match options.highlight {
+        Some(pixel) => HighlightUsed {
+            pixel,
+            source: "given".into(),
+            note: None,
+        },
+        None => {
+            let kind = DetectorKind::default();
+            let d = kind.build().detect(&prepared.image)?;
+            if d.status == DetectionStatus::FallbackCentre {
+                bail!(
+                    "{name}: no flash highlight found ({}); give it with --highlight ROW,COL",
+                    d.reason.unwrap_or_default()
+                );
+            }
+            HighlightUsed {
+                pixel: d.pixel(),
+                source: kind.name().into(),
+                note: d.reason,
+            }
+        }
+    };
+    let device = Device::Cpu;
+    let photo = prepared.image.to_tensor(&device)?;
+    let (row, col) = highlight.pixel;
+    let light = Highlight::from_pixel_on(row, col, n, PHOTO_SIDE);
+    let geometry = FlashGeometry::with_side(&[light], n, PHOTO_SIDE, DType::F32, &device)?;
+    let texel = PHOTO_SIDE / n as f64;
+
+    let raw = Var::zeros((1, brdf.channels(), n, n), DType::F32, &device)?;
+    let log_gain = Var::zeros(1, DType::F32, &device)?;
+    let mut adam = Adam::new(
+        vec![
+            ("raw".into(), raw.clone()),
+            ("log_gain".into(), log_gain.clone()),
+        ],
+        AdamConfig {
+            lr: options.lr,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        },
+    )?;
+    let start = Instant::now();
+    let mut losses = Vec::with_capacity(options.steps);
+    let predict = |raw: &Tensor, log_gain: &Tensor| -> anyhow::Result<(MaterialMaps, Tensor)> {
+        let maps = brdf.decode(raw)?.with_texel_size(Some(texel));
+        let radiance = render_radiance_with(brdf.as_ref(), &maps, &geometry)?;
+        let exposed = radiance.broadcast_mul(&log_gain.exp()?)?;
+        Ok((maps, encode_display(&exposed)?))
+    };
+    for step in 0..options.steps {
+        let (_, predicted) = predict(raw.as_tensor(), log_gain.as_tensor())?;
+        let data = (predicted - &photo)?.abs()?.mean_all()?;
+        let loss = if options.smoothness > 0.0 {
+            (data + (total_variation(raw.as_tensor())? * options.smoothness)?)?
+        } else {
+            data
+        };
+        let value = loss.to_scalar::<f32>()? as f64;
+        if !value.is_finite() {
+            bail!(
+                "{name}: the fit diverged at step {} (loss {value})",
+                step + 1
+            );
+        }
+        adam.step(&loss.backward()?)?;
+        losses.push(value);
+        progress(step + 1, value);
+    }
+    let (maps, render) = predict(raw.as_tensor(), log_gain.as_tensor())?;
+    let gain = log_gain.as_tensor().exp()?.to_vec1::<f32>()?[0] as f64;
+    Ok(Capture {
+        brdf: brdf.clone(),
+        maps: maps.map_tensors(|t| Ok(t.detach()))?,
+        photo,
+        render: render.detach(),
+        highlight,
+        gain,
+        losses,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Mean absolute difference of neighbouring texels (wrap-around) of a (B, C, H, W) tensor.
+fn total_variation(x: &Tensor) -> candle_core::Result<Tensor> {
+    let dx = (x.roll(-1, 3)? - x)?.abs()?.mean_all()?;
+    let dy = (x.roll(-1, 2)? - x)?.abs()?.mean_all()?;
+    dx + dy
+}
+
+/// What `capture.json` records.
+#[derive(Debug, Serialize)]
+struct CaptureRecord<'a> {
+    brdf: String,
+    size: usize,
+    texel_size: f64,
+    highlight: &'a HighlightUsed,
+    gain: f64,
+    steps: usize,
+    loss_first: Option<f64>,
+    loss_last: Option<f64>,
+    l1_encoded: f64,
+    seconds: f64,
+}
+
+/// Writes `out/material/` (the maps: PNG + EXR + material.json), `out/sheet.png` (photo |
+/// re-render | ×4 absolute error) and `out/capture.json`.
+pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create '{}'", out.display()))?;
+    save_maps(
+        &out.join("material"),
+        capture.brdf.as_ref(),
+        &capture.maps,
+        &SaveOptions::default(),
+    )?;
+    let error = (&capture.render - &capture.photo)?.abs()?;
+    let l1 = error.mean_all()?.to_scalar::<f32>()? as f64;
+    // ×4: errors of a few % of the range must show.
+    let row = [
+        &capture.photo,
+        &capture.render,
+        &(error * 4.0)?.clamp(0.0, 1.0)?,
+    ]
+    .iter()
+    .map(|t| PlanarImage::from_tensor(&t.squeeze(0)?))
+    .collect::<photomat_core::Result<Vec<_>>>()?;
+    write_png(&out.join("sheet.png"), &grid(&[row], 0.0)?, PngBits::Eight)?;
+    let (_, _, n, _) = capture.photo.dims4()?;
+    let record = CaptureRecord {
+        brdf: capture.brdf.name(),
+        size: n,
+        texel_size: PHOTO_SIDE / n as f64,
+        highlight: &capture.highlight,
+        gain: capture.gain,
+        steps: capture.losses.len(),
+        loss_first: capture.losses.first().copied(),
+        loss_last: capture.losses.last().copied(),
+        l1_encoded: l1,
+        seconds: capture.seconds,
+    };
+    write_atomic(
+        &out.join("capture.json"),
+        &serde_json::to_vec_pretty(&record)?,
+    )?;
+    Ok(())
+}

@@ -1,0 +1,104 @@
+//! `photomat capture PHOTO --brdf SPEC --out DIR [--size 256] [--steps 400] [--highlight ROW,COL]`:
+//! one phone flash photo → maps of a named BRDF model. The fit is the library's
+//! `photomat_capture::capture` (docs/capture.md); this command reads the file, locks DIR, shows
+//! progress and writes DIR/material/ (loadable by every command), DIR/sheet.png (photo |
+//! re-render | ×4 error) and DIR/capture.json (highlight, gain, losses, timings).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use photomat_capture::{CaptureOptions, capture, write_capture};
+use photomat_core::{FolderLock, lookup};
+
+use crate::common::steps_bar;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The flash photo (JPEG or PNG; EXIF orientation applied, centre-cropped to a square),
+    /// taken straight down with the phone's flash on, as for training photos.
+    #[arg(value_name = "PHOTO")]
+    pub photo: PathBuf,
+
+    /// BRDF model of the maps, e.g. ggx or "height(ggx)" (`photomat brdfs` lists them).
+    #[arg(long, value_name = "SPEC")]
+    pub brdf: String,
+
+    /// Output folder (created and locked while it is written).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+
+    /// Side of the maps: the photo is resampled to N² before fitting [default: 256].
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(16..=2048))]
+    pub size: Option<u32>,
+
+    /// Optimisation steps [default: 400].
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub steps: Option<u32>,
+
+    /// The flash highlight as continuous pixel ROW,COL of the N×N square, instead of
+    /// detecting it.
+    #[arg(long, value_name = "ROW,COL", value_parser = parse_pixel)]
+    pub highlight: Option<(f64, f64)>,
+}
+
+/// `ROW,COL`: two finite numbers.
+fn parse_pixel(text: &str) -> Result<(f64, f64), String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    match parts.as_slice() {
+        [r, c] => match (r.parse::<f64>(), c.parse::<f64>()) {
+            (Ok(r), Ok(c)) if r.is_finite() && c.is_finite() => Ok((r, c)),
+            _ => Err(format!("'{text}' is not ROW,COL (two numbers)")),
+        },
+        _ => Err(format!("'{text}' is not ROW,COL (two numbers)")),
+    }
+}
+
+pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
+    let brdf = lookup(&args.brdf).context("invalid --brdf")?;
+    let bytes = std::fs::read(&args.photo)
+        .with_context(|| format!("cannot read '{}'", args.photo.display()))?;
+    let defaults = CaptureOptions::default();
+    let options = CaptureOptions {
+        size: args.size.map_or(defaults.size, |n| n as usize),
+        steps: args.steps.map_or(defaults.steps, |k| k as usize),
+        highlight: args.highlight,
+        ..defaults
+    };
+    let _lock = FolderLock::acquire(&args.out, "photomat capture")?;
+    let bar = steps_bar(options.steps as u64, 0);
+    let name = args.photo.display().to_string();
+    let result = capture(&bytes, &name, &brdf, &options, &mut |step, loss| {
+        bar.set_position(step as u64);
+        bar.set_message(format!("loss {loss:.4}"));
+    });
+    bar.finish_and_clear();
+    let result = result?;
+    write_capture(&result, &args.out)?;
+    let (row, col) = result.highlight.pixel;
+    writeln!(
+        out,
+        "captured {} as {} ({}², flash above pixel ({row:.1}, {col:.1}) by {}, gain {:.3}): \
+         loss {:.4} → {:.4} in {} steps, {:.1} s",
+        name,
+        brdf.name(),
+        options.size,
+        result.highlight.source,
+        result.gain,
+        result.losses.first().copied().unwrap_or(f64::NAN),
+        result.losses.last().copied().unwrap_or(f64::NAN),
+        result.losses.len(),
+        result.seconds
+    )?;
+    let dir = args.out.display();
+    writeln!(
+        out,
+        "  {dir}/material/  the maps (photomat render --maps {dir}/material --orbit 8)"
+    )?;
+    writeln!(out, "  {dir}/sheet.png  photo | re-render | ×4 error")?;
+    writeln!(
+        out,
+        "  {dir}/capture.json  highlight, gain, losses, timings"
+    )?;
+    Ok(())
+}
