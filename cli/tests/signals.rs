@@ -1,6 +1,7 @@
 //! The `photomat` binary under SIGTERM: `train-gan` finishes the current step, writes its
 //! state, prints the resume command and exits with 143 (128 + SIGTERM), and `--resume`
 //! continues from the saved step. A child process, since the signal goes to the whole process.
+//! Also as a child with stderr to a pipe (not a terminal): a diverging run's warnings.
 #![cfg(unix)]
 
 use std::path::Path;
@@ -40,14 +41,9 @@ fn path(p: &Path) -> &str {
     p.to_str().expect("UTF-8 temp path")
 }
 
-#[test]
-fn sigterm_checkpoints_exits_143_and_resumes_from_the_saved_step() {
-    let dir = tempfile::tempdir().unwrap();
-    let (sim, data, out) = (
-        dir.path().join("sim"),
-        dir.path().join("data"),
-        dir.path().join("run"),
-    );
+/// A prepared data set of six simulated 128² photos at 64², in `dir/data`.
+fn tiny_dataset(dir: &Path) -> std::path::PathBuf {
+    let (sim, data) = (dir.join("sim"), dir.join("data"));
     run(&[
         "simulate",
         "--count",
@@ -70,6 +66,44 @@ fn sigterm_checkpoints_exits_143_and_resumes_from_the_saved_step() {
         "--size",
         "64",
     ]);
+    data
+}
+
+#[test]
+fn diverging_updates_are_reported_on_a_non_terminal_stderr_and_not_checkpointed() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, out) = (tiny_dataset(dir.path()), dir.path().join("run"));
+    // A learning rate of 1e30 sends the weights to infinity after the first update.
+    let output = photomat()
+        .args(["train-gan", "--data", path(&data), "--out", path(&out)])
+        .args(TINY)
+        .args(["--steps", "3", "--lr", "1e30"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(
+        stderr.contains("warning: step 3: skipped the update: G loss is NaN"),
+        "{stderr}"
+    );
+    assert!(
+        stderr.contains("warning: no checkpoint after step 3"),
+        "{stderr}"
+    );
+    let log = std::fs::read_to_string(out.join("log.csv")).unwrap();
+    assert!(
+        log.lines().last().unwrap().contains("G loss is NaN"),
+        "{log}"
+    );
+    // The folder keeps the first checkpoint, written before any step.
+    let state: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("gan.json")).unwrap()).unwrap();
+    assert_eq!(state["provenance"]["step"], 0, "{state}");
+}
+
+#[test]
+fn sigterm_checkpoints_exits_143_and_resumes_from_the_saved_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, out) = (tiny_dataset(dir.path()), dir.path().join("run"));
     let mut train = photomat();
     train
         .args(["train-gan", "--data", path(&data), "--out", path(&out)])
