@@ -16,9 +16,10 @@ pub mod output;
 pub mod random;
 pub mod scene;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use candle_core::Device;
+use photomat_core::folder_lock::clear_previous_outputs;
 use photomat_core::map_files::{SaveOptions, save_maps};
 use photomat_core::{Error, Highlight, Result};
 use rand::Rng;
@@ -114,34 +115,22 @@ fn prepare_output(out: &Path, overwrite: bool) -> Result<()> {
     let photos = out.join(PHOTOS_DIR);
     let truth = out.join(TRUTH_DIR);
     let manifest = out.join(SIMULATION_FILE);
-    let previous = [&photos, &truth, &manifest]
+    let previous: Vec<PathBuf> = [&photos, &truth, &manifest]
         .into_iter()
         .filter(|p| p.exists())
-        .collect::<Vec<_>>();
-    if !previous.is_empty() {
-        if !overwrite {
-            return Err(Error::file(
-                out,
-                format!(
-                    "already holds a simulation ({}); choose another folder or allow overwriting \
-                     (photomat simulate --overwrite)",
-                    previous
-                        .iter()
-                        .map(|p| p.file_name().unwrap_or_default().to_string_lossy())
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            ));
-        }
-        for path in previous {
-            let removed = if path.is_dir() {
-                std::fs::remove_dir_all(path)
-            } else {
-                std::fs::remove_file(path)
-            };
-            removed.map_err(|e| Error::file(path, format!("cannot remove: {e}")))?;
-        }
-    }
+        .cloned()
+        .collect();
+    clear_previous_outputs(out, &previous, overwrite, || {
+        format!(
+            "already holds a simulation ({}); choose another folder or allow overwriting \
+             (photomat simulate --overwrite)",
+            previous
+                .iter()
+                .map(|p| p.file_name().unwrap_or_default().to_string_lossy())
+                .collect::<Vec<_>>()
+                .join(", ")
+        )
+    })?;
     for dir in [&photos, &truth] {
         std::fs::create_dir_all(dir)
             .map_err(|e| Error::file(dir, format!("cannot create: {e}")))?;

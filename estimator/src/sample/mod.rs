@@ -52,6 +52,7 @@ use std::time::Instant;
 
 use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor};
+use photomat_core::folder_lock::clear_previous_outputs;
 use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
 use photomat_core::previews::map_previews;
@@ -542,36 +543,22 @@ fn clear_previous_samples(out: &Path, overwrite: bool) -> anyhow::Result<()> {
     let entries =
         std::fs::read_dir(out).with_context(|| format!("cannot list '{}'", out.display()))?;
     let mut previous = Vec::new();
+    let mut folders = 0;
     for entry in entries.flatten() {
         let name = entry.file_name().to_string_lossy().into_owned();
         let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
         if (is_dir && is_seed_folder(&name)) || (!is_dir && SAMPLE_FILES.contains(&name.as_str())) {
-            previous.push((entry.path(), is_dir));
+            folders += usize::from(is_dir);
+            previous.push(entry.path());
         }
     }
-    if previous.is_empty() {
-        return Ok(());
-    }
-    if !overwrite {
-        let folders = previous.iter().filter(|(_, d)| *d).count();
-        bail!(
-            "'{}' already holds samples ({folders} seed folder(s){}); add --overwrite to \
-             replace them, or choose another --out",
-            out.display(),
-            if previous.iter().any(|(p, _)| p.ends_with(SUMMARY_FILE)) {
-                ", summary.json"
-            } else {
-                ""
-            }
-        );
-    }
-    for (path, is_dir) in previous {
-        let removed = if is_dir {
-            std::fs::remove_dir_all(&path)
-        } else {
-            std::fs::remove_file(&path)
-        };
-        removed.with_context(|| format!("--overwrite: cannot remove '{}'", path.display()))?;
-    }
+    let summary = previous.iter().any(|p| p.ends_with(SUMMARY_FILE));
+    clear_previous_outputs(out, &previous, overwrite, || {
+        format!(
+            "already holds samples ({folders} seed folder(s){}); add --overwrite to replace \
+             them, or choose another --out",
+            if summary { ", summary.json" } else { "" }
+        )
+    })?;
     Ok(())
 }
