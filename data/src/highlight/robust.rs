@@ -223,7 +223,8 @@ impl HighlightDetector for RobustDetector {
 
     fn detect(&self, image: &PlanarImage) -> Result<Detection> {
         let (h, w) = (image.height, image.width);
-        let Some(fit) = self.fit(image)? else {
+        let intensity = min_rgb_linear(image)?;
+        let Some(fit) = self.fit_intensity(&intensity, h, w)? else {
             return Ok(Detection::fallback(
                 h,
                 w,
@@ -271,17 +272,19 @@ impl HighlightDetector for RobustDetector {
         // A lobe at the narrowest width searched is a single bright texel, and one as wide as
         // the photo is the diffuse falloff again: neither pins the flash down.
         let implausible = fit.alpha <= COLLAPSED_ALPHA || fit.alpha >= BROAD_ALPHA;
-        self.second_opinion(image, own, implausible)
+        self.second_opinion(image, &intensity, own, implausible)
     }
 }
 
 impl RobustDetector {
-    /// `own` (a detection of `image`), or the paper detector's centroid when the two are
-    /// more than [`Self::max_disagreement`] apart and either the fit's lobe is `implausible`
-    /// or the centroid's neighbourhood stands out more (module docs, "Second opinion").
+    /// `own` (a detection of `image`, whose intensity is `intensity`), or the paper detector's
+    /// centroid when the two are more than [`Self::max_disagreement`] apart and either the
+    /// fit's lobe is `implausible` or the centroid's neighbourhood stands out more (module
+    /// docs, "Second opinion").
     fn second_opinion(
         &self,
         image: &PlanarImage,
+        intensity: &[f64],
         own: Detection,
         implausible: bool,
     ) -> Result<Detection> {
@@ -294,13 +297,12 @@ impl RobustDetector {
         if paper.status != super::DetectionStatus::Detected || apart <= self.max_disagreement {
             return Ok(own);
         }
-        let intensity = min_rgb_linear(image)?;
         let half = (ARBITER_BOX * w as f64 / 2.0).max(1.0);
         // How much brighter a position's neighbourhood is than its surroundings three times
         // as wide: a lobe stands out, a vignetted centre or a textured patch does not.
         let contrast = |row: f64, col: f64| {
-            box_mean(&intensity, h, w, row, col, half)
-                / box_mean(&intensity, h, w, row, col, 3.0 * half).max(f64::MIN_POSITIVE)
+            box_mean(intensity, h, w, row, col, half)
+                / box_mean(intensity, h, w, row, col, 3.0 * half).max(f64::MIN_POSITIVE)
         };
         let (fit_level, centroid_level) =
             (contrast(own.row, own.col), contrast(paper.row, paper.col));
@@ -328,8 +330,12 @@ impl RobustDetector {
     /// unsaturated) pixels to fit. [`HighlightDetector::detect`] applies the failure rule to it.
     pub fn fit(&self, image: &PlanarImage) -> Result<Option<FlashFit>> {
         let intensity = min_rgb_linear(image)?;
-        let (h, w) = (image.height, image.width);
-        let cells = self.cells(&intensity, h, w);
+        self.fit_intensity(&intensity, image.height, image.width)
+    }
+
+    /// [`Self::fit`] on the intensity (row-major `h`×`w`) of the image.
+    fn fit_intensity(&self, intensity: &[f64], h: usize, w: usize) -> Result<Option<FlashFit>> {
+        let cells = self.cells(intensity, h, w);
         let usable = cells.iter().filter(|c| c.usable).count();
         let mean = cells
             .iter()
@@ -376,7 +382,7 @@ impl RobustDetector {
             fit = next;
             weights = reweight(&cells, &fit, floor);
         }
-        let (lx, ly) = refine_peak(&intensity, h, w, &fit, &cells).unwrap_or((fit.p[0], fit.p[1]));
+        let (lx, ly) = refine_peak(intensity, h, w, &fit, &cells).unwrap_or((fit.p[0], fit.p[1]));
         Ok(Some(FlashFit {
             lx,
             ly,
@@ -944,7 +950,12 @@ mod tests {
         let at = |row: f64, col: f64| Detection::detected(row, col, 128, 128);
         // A fit 30 % of the width away, in the dark: the centroid, with the reason.
         let far = detector
-            .second_opinion(&image, at(64.0, 20.0), false)
+            .second_opinion(
+                &image,
+                &min_rgb_linear(&image).unwrap(),
+                at(64.0, 20.0),
+                false,
+            )
             .unwrap();
         assert_eq!(far.pixel(), paper.pixel());
         assert!(
@@ -953,7 +964,9 @@ mod tests {
         );
         // A fit 2 % of the width from the centroid: kept, even if collapsed.
         let (row, col) = (paper.row, paper.col + 2.56);
-        let near = detector.second_opinion(&image, at(row, col), true).unwrap();
+        let near = detector
+            .second_opinion(&image, &min_rgb_linear(&image).unwrap(), at(row, col), true)
+            .unwrap();
         assert_eq!((near.pixel(), near.reason), ((row, col), None));
         // Far but on the brighter side: kept, unless its lobe collapsed to a point. Strong
         // vignetting pulls the centroid of a sharp off-centre lobe towards the centre, while
@@ -968,10 +981,17 @@ mod tests {
             "{centroid:?}"
         );
         let kept = detector
-            .second_opinion(&pulled, on_lobe.clone(), false)
+            .second_opinion(
+                &pulled,
+                &min_rgb_linear(&pulled).unwrap(),
+                on_lobe.clone(),
+                false,
+            )
             .unwrap();
         assert_eq!((kept.pixel(), kept.reason), (on_lobe.pixel(), None));
-        let sparkle = detector.second_opinion(&pulled, on_lobe, true).unwrap();
+        let sparkle = detector
+            .second_opinion(&pulled, &min_rgb_linear(&pulled).unwrap(), on_lobe, true)
+            .unwrap();
         assert_eq!(sparkle.pixel(), centroid.pixel());
         assert!(
             sparkle.reason.as_deref().unwrap().contains("sparkle"),
@@ -983,9 +1003,14 @@ mod tests {
             ..RobustDetector::default()
         };
         assert_eq!(
-            off.second_opinion(&image, at(64.0, 20.0), true)
-                .unwrap()
-                .pixel(),
+            off.second_opinion(
+                &image,
+                &min_rgb_linear(&image).unwrap(),
+                at(64.0, 20.0),
+                true
+            )
+            .unwrap()
+            .pixel(),
             (64.0, 20.0)
         );
     }
