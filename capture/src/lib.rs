@@ -104,7 +104,7 @@ pub struct HighlightUsed {
     pub pixel: (f64, f64),
     /// `given`, or the detector's name.
     pub source: String,
-    /// The detector's status or reason, if it said one.
+    /// The detector's reason, when it gave one (e.g. which estimate it chose).
     pub note: Option<String>,
 }
 
