@@ -66,6 +66,14 @@ DRIFT_RENDER = 5e-6  # render radiance, relative
 CROSS_REL = 4e-6
 
 GGX_PARAMS = [("diffuse", 3), ("specular", 3), ("roughness", 1), ("normal", 3)]
+# Variants of `ggx` (its choice arguments; docs/plugins.md, "Model variants"). Mitsuba has no
+# plugin for them, so their references come from the composed model alone, with Mitsuba's own
+# `smith_g1` for the height-correlated term: (golden stem, specification, choices).
+GGX_VARIANTS = [
+    ("ggx_shadowing_correlated", "ggx(shadowing=correlated)", {"shadowing": "correlated"}),
+    ("ggx_shadowing_implicit", "ggx(shadowing=implicit)", {"shadowing": "implicit"}),
+    ("ggx_fresnel_constant", "ggx(fresnel=constant)", {"fresnel": "constant"}),
+]
 COATED_PARAMS = [
     ("diffuse", 3),
     ("specular", 3),
@@ -371,8 +379,9 @@ def plugin_values(model, cases):
     return out
 
 
-def composed(model, cases, alpha_floor=None, grad_channel=None):
-    """The composed model in llvm_ad_rgb, vectorised over cases.
+def composed(model, cases, alpha_floor=None, grad_channel=None, variant=None):
+    """The composed model in llvm_ad_rgb, vectorised over cases; `variant` holds `ggx`'s
+    non-default choices (GGX_VARIANTS).
 
     Returns (f_cos [3 lists], cos_o list, grads) where grads maps every input name (params plus
     "wi", "wo") to per-channel lists when `grad_channel` is given (reverse mode from the sum over
@@ -415,10 +424,22 @@ def composed(model, cases, alpha_floor=None, grad_channel=None):
             alpha = dr.maximum(alpha, alpha_floor)  # principled's floor, emulated
         dist = mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha)  # clamps α ≥ 1e-4 itself
         D = dist.eval(h)
-        G = dist.G(wi, wo, h)
-        m = dr.clip(1.0 - dr.dot(wi, h), 0.0, 1.0)
-        weight = dr.square(dr.square(m)) * m  # principled's schlick_weight
-        F = dr.lerp(weight, 1.0, inputs[spec])  # = F0 + (1 − F0)·weight, principled's calc_schlick
+        shadowing = (variant or {}).get("shadowing", "separable")
+        if shadowing == "separable":
+            G = dist.G(wi, wo, h)
+        elif shadowing == "correlated":
+            # 1/(1 + Λi + Λo) with Λ = 1/G1 − 1 (Heitz 2014, eq. 99); masked lanes use G1 = 1.
+            g1_i = dr.select(active, dist.smith_g1(wi, h), 1.0)
+            g1_o = dr.select(active, dist.smith_g1(wo, h), 1.0)
+            G = 1.0 / (1.0 / g1_i + 1.0 / g1_o - 1.0)
+        else:  # implicit: cos θ_i cos θ_o (Hoffman 2010)
+            G = cos_i * cos_o
+        if (variant or {}).get("fresnel", "schlick") == "schlick":
+            m = dr.clip(1.0 - dr.dot(wi, h), 0.0, 1.0)
+            weight = dr.square(dr.square(m)) * m  # principled's schlick_weight
+            F = dr.lerp(weight, 1.0, inputs[spec])  # = F0 + (1 − F0)·weight, principled's calc_schlick
+        else:  # constant: F0 at every angle
+            F = inputs[spec]
         lobe = F * D * G / (4.0 * safe_cos_i)
         value = value + dr.select(compatible, lobe, 0.0)
     value = dr.select(active, value, 0.0)
@@ -448,13 +469,13 @@ def jittered(cases, rnd):
     ]
 
 
-def composed_all(model, cases):
+def composed_all(model, cases, variant=None):
     """Composed values and the gradients of all three output channels."""
-    values, _, _ = composed(model, cases)
-    return values, [composed(model, cases, grad_channel=c)[2] for c in range(3)]
+    values, _, _ = composed(model, cases, variant=variant)
+    return values, [composed(model, cases, grad_channel=c, variant=variant)[2] for c in range(3)]
 
 
-def reference_noise(model, cases, values, grads):
+def reference_noise(model, cases, values, grads, variant=None):
     """Per case, how far the float32 reference moves when its inputs move by a few roundoffs:
     (value noise relative to |f·cos θ_o|, gradient noise relative to the gradient-row norm).
     This measures what float32 can resolve of each reference, internal cancellation included."""
@@ -463,7 +484,7 @@ def reference_noise(model, cases, values, grads):
     value_noise = [0.0] * len(cases)
     grad_noise = [0.0] * len(cases)
     for _ in range(NOISE_RUNS):
-        v_j, g_j = composed_all(model, jittered(cases, rnd))
+        v_j, g_j = composed_all(model, jittered(cases, rnd), variant)
         for i in range(len(cases)):
             for c in range(3):
                 a, b = v_j[c][i], values[c][i]
@@ -480,18 +501,23 @@ def reference_noise(model, cases, values, grads):
     return value_noise, grad_noise
 
 
-def reference_cases(model, cases):
-    """Fill every case with f, f·cos θ_o, gradients, float32 noise and class."""
+def reference_cases(model, cases, variant=None):
+    """Fill every case with f, f·cos θ_o, gradients, float32 noise and class. A variant has no
+    Mitsuba plugin: its values are the composed model's."""
     names = GGX_PARAMS if model == "ggx" else COATED_PARAMS
-    plugin = plugin_values(model, cases)
-    comp, per_channel = composed_all(model, cases)
+    comp, per_channel = composed_all(model, cases, variant)
+    if variant:
+        _, comp_cos_o, _ = composed(model, cases, variant=variant)
+        plugin = [([comp[k][i] for k in range(3)], comp_cos_o[i]) for i in range(len(cases))]
+    else:
+        plugin = plugin_values(model, cases)
     comp_floor, _, _ = composed(model, cases, alpha_floor=1e-3)
-    value_noise, grad_noise = reference_noise(model, cases, comp, per_channel)
+    value_noise, grad_noise = reference_noise(model, cases, comp, per_channel, variant)
     report = {"plugin_vs_composed_max_rel": 0.0}
     out = []
     for i, c in enumerate(cases):
         (pv, cos_o) = plugin[i]
-        floor_differs = principled_alpha_matters(model, c["params"])
+        floor_differs = not variant and principled_alpha_matters(model, c["params"])
         cv = [comp[k][i] for k in range(3)]
         # Cross-check: the plugin sum equals the composed model with principled's α floor.
         ref_for_plugin = [comp_floor[k][i] for k in range(3)] if floor_differs else cv
@@ -507,7 +533,7 @@ def reference_cases(model, cases):
                     f"(rel {rel:.3g} > {bound:.3g})"
                 )
             report["plugin_vs_composed_max_rel"] = max(report["plugin_vs_composed_max_rel"], rel)
-        value = cv if floor_differs else pv
+        value = cv if floor_differs or variant else pv
         f = [v / cos_o if cos_o > 0 else 0.0 for v in value]
         grads_finite = all(
             math.isfinite(per_channel[k][name][j][i]) for k in range(3) for name, ch in names for j in range(ch)
@@ -527,7 +553,7 @@ def reference_cases(model, cases):
             {
                 "tag": c["tag"],
                 "class": "strict" if strict else "ill_conditioned",
-                "value_source": "composed" if floor_differs else "plugin",
+                "value_source": "composed" if floor_differs or variant else "plugin",
                 "value_noise": q(value_noise[i]) if math.isfinite(value_noise[i]) else 1.0,
                 "grad_noise": q(grad_noise[i]) if math.isfinite(grad_noise[i]) else 1.0,
                 "wi": ql(c["wi"]),
@@ -549,12 +575,13 @@ def brdf_inputs(model):
     return cases
 
 
-def brdf_golden(model, cases):
+def brdf_golden(model, cases, spec=None, variant=None):
+    """`spec` and `variant` name one of GGX_VARIANTS (then `model` is "ggx")."""
     params = GGX_PARAMS if model == "ggx" else COATED_PARAMS
-    refs, report = reference_cases(model, cases)
+    refs, report = reference_cases(model, cases, variant)
     meta = metadata(
         kind="brdf",
-        model=model,
+        model=spec or model,
         description=(
             f"Mitsuba 3 reference of photomat's `{model}`: per case the inputs (unit-ish float32 "
             "directions wi, wo in the model's world frame, parameter values), f, f·cos θ_o and "
@@ -570,6 +597,7 @@ def brdf_golden(model, cases):
             "noise": f"{NOISE_RUNS} runs, inputs moved by up to {NOISE_ULPS} float32 roundoffs",
             "random_roughness_min": RANDOM_ROUGHNESS_MIN,
             "plugin_vs_composed_max_rel": report["plugin_vs_composed_max_rel"],
+            **({"variant": variant, "source": "composed model only (Mitsuba has no plugin)"} if variant else {}),
         },
     )
     return {"meta": meta, "cases": refs}
@@ -969,15 +997,16 @@ class Drift:
             self.failures.append(f"{what}: committed {old!r}, regenerated {new!r} (tolerance {tol:g} × {scale_:.3g})")
 
 
-def check_brdf(model, drift):
-    committed = load(model)
+def check_brdf(model, drift, stem=None, variant=None):
+    stem = stem or model
+    committed = load(stem)
     cases = [
         {"tag": c["tag"], "wi": unq(c["wi"]), "wo": unq(c["wo"]), "params": {k: unq(v) for k, v in c["params"].items()}}
         for c in committed["cases"]
     ]
-    fresh, _ = reference_cases(model, cases)
+    fresh, _ = reference_cases(model, cases, variant)
     for i, (old, new) in enumerate(zip(committed["cases"], fresh)):
-        where = f"{model}.json case {i} ({old['tag']})"
+        where = f"{stem}.json case {i} ({old['tag']})"
         if old["class"] != new["class"]:
             drift.failures.append(f"{where}: class {old['class']} → {new['class']}")
         value_tol = max(DRIFT_REL, DRIFT_NOISE_FACTOR * old["value_noise"])
@@ -1046,6 +1075,8 @@ def main():
     if args.mode == "generate":
         for model in ("ggx", "coated"):
             write(model, brdf_golden(model, brdf_inputs(model)))
+        for stem, spec, variant in GGX_VARIANTS:
+            write(stem, brdf_golden("ggx", brdf_inputs("ggx"), spec, variant))
         write("height", height_golden(height_inputs()))
         for stem, model, size, highlight in RENDERS:
             write(stem, render_golden(stem, model, size, highlight, render_inputs(stem, model, size)))
@@ -1054,6 +1085,8 @@ def main():
     drift = Drift()
     for model in ("ggx", "coated"):
         check_brdf(model, drift)
+    for stem, _, variant in GGX_VARIANTS:
+        check_brdf("ggx", drift, stem, variant)
     check_height(drift)
     for stem, _, _, _ in RENDERS:
         check_render(stem, drift)

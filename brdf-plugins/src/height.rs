@@ -93,12 +93,12 @@ register_brdf! {
     summary: "adapter: nested model's normal map from a height map (Mitsuba 'bumpmap')",
     adds: &[HEIGHT],
     replaces: &["normal"],
-    args: &[ArgSpec {
-        name: "scale",
-        default: 0.02,
-        range: (0.0, 1.0),
-        doc: "world-space height of h = 1 (the plane side is 1)",
-    }],
+    args: &[ArgSpec::number(
+        "scale",
+        0.02,
+        (0.0, 1.0),
+        "world-space height of h = 1 (the plane side is 1)",
+    )],
     adapter: |args| {
         Ok(HeightToNormal {
             scale: args.value("scale")?,

@@ -24,8 +24,9 @@ pub fn builtin_names() -> Result<Vec<&'static str>> {
         .collect())
 }
 
-/// The configurations the built-ins are tested and benchmarked in: every model by name and
-/// every adapter around the first model it accepts (`coated`, `ggx`, `lambert`,
+/// The configurations the built-ins are tested and benchmarked in: every model by name, its
+/// variants (`ggx(shadowing=correlated)`, …) and every adapter around the first model it
+/// accepts (`coated`, `ggx`, …, `lambert`,
 /// `height(ggx)`); see [`photomat_core::testing::configurations`].
 pub fn builtin_configurations() -> Result<Vec<String>> {
     photomat_core::testing::configurations(&[module_path!()])

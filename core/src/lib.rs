@@ -51,8 +51,9 @@ pub use lights::LightSet;
 pub use maps::MaterialMaps;
 pub use model::{ModelBrdf, Reflectance};
 pub use param::{ColorSpace, Encoding, ParamSpec};
+pub use plugin_spec::{ArgValue, PluginSpec};
 pub use registry::{
-    ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations,
+    ArgKind, ArgSpec, BrdfArgs, BrdfRegistration, lookup, registered_names, registrations,
     registrations_from,
 };
 pub use render::{encode_display, render, render_radiance, render_radiance_with, render_with};

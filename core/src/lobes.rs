@@ -1,4 +1,5 @@
-//! Reflectance lobes that models sum: Lambert diffuse and the GGX microfacet specular lobe.
+//! Reflectance lobes that models sum: Lambert diffuse and the GGX microfacet specular lobe (with
+//! its masking and Fresnel choices, `microfacet::{Masking, FresnelTerm}`).
 //!
 //! Both return the lobe's `f·cos θ_o`, masked to exactly 0 below the horizon. The specular
 //! lobe is `D·F·G / (4 cos θ_i cos θ_o) · cos θ_o = D·F·G1(o)·(G1(i)/cos θ_i) / 4` (Walter et al.
@@ -12,7 +13,10 @@ use std::f64::consts::PI;
 use candle_core::Tensor;
 
 use crate::Result;
-use crate::microfacet::{alpha_from_roughness, ggx_d, schlick, smith_g1, smith_g1_over_cos};
+use crate::microfacet::{
+    FresnelTerm, Masking, alpha_from_roughness, ggx_d, schlick, smith_correlated_over_4cos,
+    smith_g1, smith_g1_over_cos,
+};
 use crate::shading::ShadingGeometry;
 
 /// Lambert: `ρ/π · cos θ_o`.
@@ -25,16 +29,57 @@ pub fn lambert(geometry: &ShadingGeometry, albedo: &Tensor) -> Result<Tensor> {
 /// `fresnel` (B|1, 3, H, W), `alpha` (B|1, 1, H|1, W|1). Models with their own Fresnel or α
 /// mapping build on this.
 pub fn ggx_lobe(geometry: &ShadingGeometry, fresnel: &Tensor, alpha: &Tensor) -> Result<Tensor> {
+    ggx_lobe_masked(geometry, fresnel, alpha, Masking::Separable)
+}
+
+/// [`ggx_lobe`] with the masking term chosen: `fresnel · D · G/(4 cos θ_i cos θ_o) · cos θ_o`,
+/// each form division-free in the cosines (`Masking` documents the three).
+pub fn ggx_lobe_masked(
+    geometry: &ShadingGeometry,
+    fresnel: &Tensor,
+    alpha: &Tensor,
+    masking: Masking,
+) -> Result<Tensor> {
     let d = ggx_d(&geometry.cos_h, &geometry.sin2_h, alpha)?;
-    let g1_o = smith_g1(&geometry.cos_o, alpha)?;
-    let g1_i_over_cos = smith_g1_over_cos(&geometry.cos_i, alpha)?;
-    let scalar = (d.broadcast_mul(&g1_o)?.broadcast_mul(&g1_i_over_cos)? * 0.25)?
-        .broadcast_mul(&geometry.mask)?;
+    // G/(4 cos θ_i cos θ_o) · cos θ_o.
+    let shadowing = match masking {
+        Masking::Separable => {
+            (smith_g1(&geometry.cos_o, alpha)?
+                .broadcast_mul(&smith_g1_over_cos(&geometry.cos_i, alpha)?)?
+                * 0.25)?
+        }
+        Masking::Correlated => {
+            smith_correlated_over_4cos(&geometry.cos_i, &geometry.cos_o, alpha, &geometry.mask)?
+        }
+        Masking::Implicit => (&geometry.cos_o * 0.25)?,
+    };
+    let scalar = d.broadcast_mul(&shadowing)?.broadcast_mul(&geometry.mask)?;
     Ok(fresnel.broadcast_mul(&scalar)?)
 }
 
 /// GGX specular with Schlick Fresnel (`f0` = specular albedo) and `α = max(roughness², 1e-4)`.
 pub fn ggx_specular(geometry: &ShadingGeometry, f0: &Tensor, roughness: &Tensor) -> Result<Tensor> {
+    ggx_specular_with(
+        geometry,
+        f0,
+        roughness,
+        Masking::Separable,
+        FresnelTerm::Schlick,
+    )
+}
+
+/// [`ggx_specular`] with the masking and Fresnel terms chosen.
+pub fn ggx_specular_with(
+    geometry: &ShadingGeometry,
+    f0: &Tensor,
+    roughness: &Tensor,
+    masking: Masking,
+    fresnel: FresnelTerm,
+) -> Result<Tensor> {
     let alpha = alpha_from_roughness(roughness)?;
-    ggx_lobe(geometry, &schlick(&geometry.cos_d, f0)?, &alpha)
+    let fresnel = match fresnel {
+        FresnelTerm::Schlick => schlick(&geometry.cos_d, f0)?,
+        FresnelTerm::Constant => f0.clone(),
+    };
+    ggx_lobe_masked(geometry, &fresnel, &alpha, masking)
 }

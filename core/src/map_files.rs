@@ -40,7 +40,7 @@ use crate::image_io::{
 };
 use crate::maps::MaterialMaps;
 use crate::param::{ColorSpace, ParamSpec};
-use crate::plugin_spec::PluginSpec;
+use crate::plugin_spec::{ArgValue, PluginSpec};
 use crate::registry::lookup;
 use crate::{Error, Result};
 
@@ -86,7 +86,7 @@ pub struct MapManifest {
     /// Scalar arguments of the outermost model (also spelled out in `brdf`, which wins; a
     /// manifest whose `args` disagree with `brdf` is rejected). Omitted when empty.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
-    pub args: BTreeMap<String, f64>,
+    pub args: BTreeMap<String, ArgValue>,
     /// Side R of the square maps, in texels.
     pub resolution: usize,
     /// World units per texel, for maps of a spatial model (`MaterialMaps::texel_size`: the
@@ -360,7 +360,7 @@ pub fn read_manifest(path: &Path) -> Result<MapManifest> {
             )));
         }
     }
-    let spelled: BTreeMap<String, f64> = spec.values.into_iter().collect();
+    let spelled: BTreeMap<String, ArgValue> = spec.values.into_iter().collect();
     if !manifest.args.is_empty() && manifest.args != spelled {
         return Err(bad(format!(
             "field 'args' {:?} disagrees with the arguments in brdf '{}'; edit the brdf string",

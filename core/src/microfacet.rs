@@ -1,8 +1,12 @@
-//! The one shared microfacet module: GGX normal distribution, exact Smith G1 and Schlick
-//! Fresnel, on per-texel cosines.
+//! The one shared microfacet module: GGX normal distribution, the masking-shadowing terms
+//! (exact separable Smith, height-correlated Smith, the implicit term) and Schlick Fresnel, on
+//! per-texel cosines.
 //!
 //! Follows Mitsuba 3's `MicrofacetDistribution` (GGX, isotropic) and Walter et al. 2007,
-//! "Microfacet Models for Refraction through Rough Surfaces"; Schlick 1994 for Fresnel.
+//! "Microfacet Models for Refraction through Rough Surfaces"; Heitz 2014, "Understanding the
+//! Masking-Shadowing Function in Microfacet-Based BRDFs", for the height-correlated form;
+//! Hoffman 2010, "Physically-Based Shading Models in Film and Game Production", for the implicit
+//! term; Schlick 1994 for Fresnel.
 //! Every plugin builds its specular lobes from these functions so that the α floor and the
 //! numerically careful forms live in exactly one place (pbrt-v4's `scattering.h` layout).
 //!
@@ -52,16 +56,54 @@ pub fn ggx_d(cos_h: &Tensor, sin2_h: &Tensor, alpha: &Tensor) -> Result<Tensor> 
     Ok(denom.recip()?)
 }
 
-/// `c + sqrt(c² + α²(1 − c²))` written as `c + sqrt(α² + c²(1 − α²))`: no cancellation, and the
-/// square root's argument is ≥ α² ≥ 1e-8 for c ∈ [0, 1], so its slope stays finite.
-fn smith_denominator(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
+/// The masking-shadowing term G(i, o) of a GGX lobe: the accuracy/cost choice of the `ggx`
+/// model's `shadowing` argument (`docs/plugins.md`, "Model variants").
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Masking {
+    /// `G = G1(i)·G1(o)`, the exact GGX G1 per direction: Mitsuba's and the paper's choice.
+    Separable,
+    /// `G = 1 / (1 + Λ(i) + Λ(o))`, height-correlated Smith (Heitz 2014): the more accurate
+    /// masking (a microfacet masked for one direction is likely shadowed for the other).
+    Correlated,
+    /// `G = cos θ_i · cos θ_o` (Hoffman 2010): cancels the denominator's cosines, no masking
+    /// to evaluate; the cheap end.
+    Implicit,
+}
+
+/// `sqrt(c² + α²(1 − c²))` written as `sqrt(α² + c²(1 − α²))`: no cancellation, and the
+/// argument is ≥ α² ≥ 1e-8 for c ∈ [0, 1], so its slope stays finite. It is `c·sqrt(1 + α²
+/// tan²θ)`, from which Smith's Λ(c) = (root − c) / 2c.
+fn smith_root(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
     let alpha2 = alpha.sqr()?;
-    let root = cos_v
+    Ok(cos_v
         .sqr()?
         .broadcast_mul(&(1.0 - &alpha2)?)?
         .broadcast_add(&alpha2)?
-        .sqrt()?;
-    Ok((cos_v + root)?)
+        .sqrt()?)
+}
+
+/// `c + sqrt(c² + α²(1 − c²))` = `2c / G1(c)`.
+fn smith_denominator(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
+    Ok((cos_v + smith_root(cos_v, alpha)?)?)
+}
+
+/// Height-correlated Smith divided by the microfacet denominator's `4 cos θ_i`:
+/// `G2 / (4 cos θ_i)` with `G2 = 1/(1 + Λ(i) + Λ(o)) = 2 c_i c_o / (c_o r_i + c_i r_o)` and
+/// `r = smith_root`, i.e. `c_o / (2 (c_o r_i + c_i r_o))`, division-free in the cosines.
+/// `mask` (0/1) is the below-horizon mask: masked texels divide by `denominator + 1` instead,
+/// so a texel with both cosines 0 (denominator 0) stays finite in value and gradient, and
+/// unmasked ones (denominator ≥ α (c_i + c_o) > 0) are exact.
+pub fn smith_correlated_over_4cos(
+    cos_i: &Tensor,
+    cos_o: &Tensor,
+    alpha: &Tensor,
+    mask: &Tensor,
+) -> Result<Tensor> {
+    let root_i = smith_root(cos_i, alpha)?;
+    let root_o = smith_root(cos_o, alpha)?;
+    let denominator = (cos_o.broadcast_mul(&root_i)? + cos_i.broadcast_mul(&root_o)?)?;
+    let safe = (denominator + (1.0 - mask)?)?;
+    Ok((cos_o / (safe * 2.0)?)?)
 }
 
 /// Exact GGX Smith masking for one direction, `cos_v = n·v ≥ 0`:
@@ -74,6 +116,15 @@ pub fn smith_g1(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
 /// what lets the specular lobe divide by cos θ_i without any clamp.
 pub fn smith_g1_over_cos(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
     Ok((smith_denominator(cos_v, alpha)?.recip()? * 2.0)?)
+}
+
+/// The Fresnel term of a GGX lobe: the `ggx` model's `fresnel` argument.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FresnelTerm {
+    /// Schlick 1994 with `F0` = specular albedo: the paper's and Mitsuba `principled`'s choice.
+    Schlick,
+    /// `F = F0` at every angle: no grazing brightening, one multiply cheaper.
+    Constant,
 }
 
 /// Schlick's Fresnel `F = F0 + (1 − F0)(1 − cos)^5` with `cos = wi·h` (B,1,H,W) and

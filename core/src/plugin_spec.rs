@@ -1,16 +1,38 @@
-//! Parser for model specification strings: `ggx`, `height(ggx)`, `height(coated, scale=0.05)`.
+//! Parser for model specification strings: `ggx`, `height(ggx)`, `height(coated, scale=0.05)`,
+//! `ggx(shadowing=correlated)`.
 //!
 //! Grammar (whitespace ignored):
 //! ```text
 //! spec := NAME [ "(" arg { "," arg } ")" ]
-//! arg  := NAME "=" NUMBER        a scalar argument of the model
+//! arg  := NAME "=" NUMBER        a numeric argument of the model
+//!       | NAME "=" NAME          a choice argument (one of the words the model lists)
 //!       | spec                   a nested model (adapters take exactly one)
 //! NAME := [A-Za-z_][A-Za-z0-9_-]*
 //! ```
 
 use std::fmt;
 
+use serde::{Deserialize, Serialize};
+
 use crate::{Error, Result};
+
+/// The value of one argument: a number (`scale=0.02`) or a word (`shadowing=correlated`).
+/// Untagged in JSON, so a number is written as a JSON number and a word as a string.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(untagged)]
+pub enum ArgValue {
+    Number(f64),
+    Word(String),
+}
+
+impl fmt::Display for ArgValue {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            ArgValue::Number(v) => write!(f, "{v}"),
+            ArgValue::Word(w) => f.write_str(w),
+        }
+    }
+}
 
 /// A parsed specification.
 #[derive(Debug, Clone, PartialEq)]
@@ -19,8 +41,8 @@ pub struct PluginSpec {
     pub name: String,
     /// Nested model specifications, in order.
     pub nested: Vec<PluginSpec>,
-    /// Scalar arguments, in the order written.
-    pub values: Vec<(String, f64)>,
+    /// Arguments, in the order written.
+    pub values: Vec<(String, ArgValue)>,
 }
 
 impl PluginSpec {
@@ -51,6 +73,38 @@ impl fmt::Display for PluginSpec {
             .collect();
         write!(f, "({})", args.join(", "))
     }
+}
+
+/// Splits a comma-separated list of specifications at the commas outside parentheses:
+/// `"lambert, height(ggx, scale=0.05)"` → `["lambert", "height(ggx, scale=0.05)"]` (each
+/// trimmed; an empty item or unbalanced parentheses are an error naming the list).
+pub fn split_list(text: &str) -> Result<Vec<String>> {
+    let bad = |reason: &str| Error::BadSpec {
+        spec: text.to_string(),
+        reason: reason.to_string(),
+    };
+    let mut items = Vec::new();
+    let mut depth = 0usize;
+    let mut start = 0;
+    for (i, c) in text.char_indices() {
+        match c {
+            '(' => depth += 1,
+            ')' => depth = depth.checked_sub(1).ok_or_else(|| bad("unbalanced ')'"))?,
+            ',' if depth == 0 => {
+                items.push(text[start..i].trim().to_string());
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    if depth != 0 {
+        return Err(bad("unbalanced '('"));
+    }
+    items.push(text[start..].trim().to_string());
+    if items.iter().any(String::is_empty) {
+        return Err(bad("empty item in the list"));
+    }
+    Ok(items)
 }
 
 struct Parser<'a> {
@@ -116,6 +170,16 @@ impl Parser<'_> {
         Ok(value)
     }
 
+    /// A word when the value starts with a letter or `_`, else a number.
+    fn value(&mut self) -> Result<ArgValue> {
+        self.skip_ws();
+        if self.text[self.pos..].starts_with(|c: char| c.is_ascii_alphabetic() || c == '_') {
+            Ok(ArgValue::Word(self.name()?))
+        } else {
+            Ok(ArgValue::Number(self.number()?))
+        }
+    }
+
     fn spec(&mut self) -> Result<PluginSpec> {
         let name = self.name()?;
         let mut spec = PluginSpec {
@@ -133,7 +197,7 @@ impl Parser<'_> {
                 if spec.values.iter().any(|(k, _)| *k == arg) {
                     return Err(self.error(&format!("argument '{arg}' given twice")));
                 }
-                let value = self.number()?;
+                let value = self.value()?;
                 spec.values.push((arg, value));
             } else {
                 self.pos = start;
@@ -158,15 +222,52 @@ mod tests {
         let s = PluginSpec::parse(" height( ggx , scale = 2.5e-2 ) ").unwrap();
         assert_eq!(s.name, "height");
         assert_eq!(s.nested, vec![PluginSpec::parse("ggx").unwrap()]);
-        assert_eq!(s.values, vec![("scale".to_string(), 0.025)]);
+        assert_eq!(
+            s.values,
+            vec![("scale".to_string(), ArgValue::Number(0.025))]
+        );
         assert_eq!(s.to_string(), "height(ggx, scale=0.025)");
     }
 
     #[test]
+    fn plugin_spec_parses_word_values() {
+        let s = PluginSpec::parse("ggx( shadowing = correlated, fresnel=none )").unwrap();
+        assert_eq!(
+            s.values,
+            vec![
+                ("shadowing".to_string(), ArgValue::Word("correlated".into())),
+                ("fresnel".to_string(), ArgValue::Word("none".into())),
+            ]
+        );
+        assert_eq!(s.to_string(), "ggx(shadowing=correlated, fresnel=none)");
+        assert_eq!(
+            serde_json::to_string(&s.values.iter().map(|(_, v)| v).collect::<Vec<_>>()).unwrap(),
+            r#"["correlated","none"]"#
+        );
+    }
+
+    #[test]
     fn plugin_spec_round_trips_through_display() {
-        for text in ["ggx", "height(coated)", "a(b(c, k=1), x=-2)"] {
+        for text in [
+            "ggx",
+            "height(coated)",
+            "a(b(c, k=1), x=-2)",
+            "a(b(w=x_y), k=-1)",
+        ] {
             let s = PluginSpec::parse(text).unwrap();
             assert_eq!(PluginSpec::parse(&s.to_string()).unwrap(), s);
+        }
+    }
+
+    #[test]
+    fn spec_lists_split_at_top_level_commas_only() {
+        assert_eq!(
+            split_list(" lambert,ggx , height(ggx, scale=0.05),coated").unwrap(),
+            ["lambert", "ggx", "height(ggx, scale=0.05)", "coated"]
+        );
+        assert_eq!(split_list("ggx").unwrap(), ["ggx"]);
+        for bad in ["", "ggx,", "a(b,c", "a)b,c", "ggx,,coated"] {
+            assert!(split_list(bad).is_err(), "{bad}");
         }
     }
 
@@ -180,6 +281,8 @@ mod tests {
             "(ggx)",
             "h(s=)",
             "h(s=1, s=2)",
+            "h(s=a b)",
+            "h(s=1, s=w)",
             "1ggx",
         ] {
             let err = PluginSpec::parse(text).unwrap_err().to_string();

@@ -14,19 +14,91 @@
 
 use crate::brdf::Brdf;
 use crate::param::ParamSpec;
-use crate::plugin_spec::PluginSpec;
+use crate::plugin_spec::{ArgValue, PluginSpec};
 use crate::{Error, Result};
 use std::collections::BTreeMap;
 
-/// A scalar construction argument of a model (Mitsuba's plugin properties), e.g. `scale`.
-/// Arguments are not maps: they are fixed per model instance and never differentiated.
+/// A construction argument of a model (Mitsuba's plugin properties): a number such as the
+/// height adapter's `scale`, or a choice among words such as `ggx`'s `shadowing`. Arguments are
+/// not maps: they are fixed per model instance and never differentiated.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ArgSpec {
     pub name: &'static str,
-    pub default: f64,
-    /// Inclusive valid range.
-    pub range: (f64, f64),
+    pub kind: ArgKind,
     pub doc: &'static str,
+}
+
+/// What values an argument takes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ArgKind {
+    /// A finite number in an inclusive range.
+    Number { default: f64, range: (f64, f64) },
+    /// One of these words; the first is the default. A choice at its default is left out of
+    /// the canonical specification, so that names written before the choice existed (in
+    /// estimator.json and material.json) keep naming the same model.
+    Choice { words: &'static [&'static str] },
+}
+
+impl ArgSpec {
+    /// A numeric argument.
+    pub const fn number(
+        name: &'static str,
+        default: f64,
+        range: (f64, f64),
+        doc: &'static str,
+    ) -> Self {
+        ArgSpec {
+            name,
+            kind: ArgKind::Number { default, range },
+            doc,
+        }
+    }
+
+    /// A choice argument; `words[0]` is the default.
+    pub const fn choice(
+        name: &'static str,
+        words: &'static [&'static str],
+        doc: &'static str,
+    ) -> Self {
+        ArgSpec {
+            name,
+            kind: ArgKind::Choice { words },
+            doc,
+        }
+    }
+
+    /// The value used when a specification does not give one.
+    pub fn default_value(&self) -> ArgValue {
+        match self.kind {
+            ArgKind::Number { default, .. } => ArgValue::Number(default),
+            ArgKind::Choice { words } => ArgValue::Word(words[0].to_string()),
+        }
+    }
+
+    /// `value` checked against this argument: a number in range or one of the words.
+    fn check(&self, value: &ArgValue) -> std::result::Result<(), String> {
+        match (self.kind, value) {
+            (ArgKind::Number { range, .. }, ArgValue::Number(v)) => {
+                if (range.0..=range.1).contains(v) {
+                    Ok(())
+                } else {
+                    Err(format!(
+                        "argument {}={v} is outside [{}, {}]",
+                        self.name, range.0, range.1
+                    ))
+                }
+            }
+            (ArgKind::Choice { words }, ArgValue::Word(w)) if words.contains(&w.as_str()) => Ok(()),
+            (ArgKind::Choice { words }, value) => Err(format!(
+                "argument {}={value} is not one of: {}",
+                self.name,
+                words.join(", ")
+            )),
+            (ArgKind::Number { .. }, ArgValue::Word(w)) => {
+                Err(format!("argument {}={w} must be a number", self.name))
+            }
+        }
+    }
 }
 
 /// The const record a plugin submits (written by [`register_brdf!`](crate::register_brdf)).
@@ -41,7 +113,7 @@ pub struct BrdfRegistration {
     pub replaces: &'static [&'static str],
     /// Whether the model wraps exactly one nested model (an adapter).
     pub takes_nested: bool,
-    /// Scalar construction arguments.
+    /// Construction arguments (numbers and choices).
     pub args: &'static [ArgSpec],
     /// Builds an instance from validated arguments.
     pub construct: fn(&BrdfArgs) -> Result<Brdf>,
@@ -71,7 +143,7 @@ pub struct BrdfArgs {
     registration: &'static BrdfRegistration,
     canonical: String,
     nested: Option<Brdf>,
-    values: BTreeMap<&'static str, f64>,
+    values: BTreeMap<&'static str, ArgValue>,
 }
 
 impl BrdfArgs {
@@ -93,12 +165,34 @@ impl BrdfArgs {
             .ok_or_else(|| Error::Invalid(format!("'{}' needs a nested model", self.canonical)))
     }
 
-    /// A scalar argument's value (given or default).
+    /// A numeric argument's value (given or default).
     pub fn value(&self, name: &str) -> Result<f64> {
-        self.values
-            .get(name)
-            .copied()
-            .ok_or_else(|| Error::Invalid(format!("'{}' has no argument '{name}'", self.canonical)))
+        match self.values.get(name) {
+            Some(ArgValue::Number(v)) => Ok(*v),
+            _ => Err(Error::Invalid(format!(
+                "'{}' has no numeric argument '{name}'",
+                self.canonical
+            ))),
+        }
+    }
+
+    /// A choice argument's word (given or default), as the registration spells it.
+    pub fn choice(&self, name: &str) -> Result<&'static str> {
+        let words = self.registration.args.iter().find_map(|a| match a.kind {
+            ArgKind::Choice { words } if a.name == name => Some(words),
+            _ => None,
+        });
+        match (words, self.values.get(name)) {
+            (Some(words), Some(ArgValue::Word(w))) => {
+                words.iter().copied().find(|x| x == w).ok_or_else(|| {
+                    Error::Invalid(format!("'{}': {name}={w} is no choice", self.canonical))
+                })
+            }
+            _ => Err(Error::Invalid(format!(
+                "'{}' has no choice argument '{name}'",
+                self.canonical
+            ))),
+        }
     }
 }
 
@@ -130,12 +224,13 @@ inventory::collect!(BrdfRegistration);
 ///     summary: "nested model's normal map from a height map",
 ///     adds: &[HEIGHT],
 ///     replaces: &["normal"],
-///     args: &[ArgSpec { name: "scale", default: 0.02, range: (0.0, 1.0), doc: "…" }],
+///     args: &[ArgSpec::number("scale", 0.02, (0.0, 1.0), "…")],
 ///     adapter: |args| Ok(HeightToNormal { scale: args.value("scale")? }),
 /// }
 /// ```
 ///
-/// `args` (scalar construction arguments, read with [`BrdfArgs::value`]) is optional in both.
+/// `args` (construction arguments: numbers read with [`BrdfArgs::value`], choices with
+/// [`BrdfArgs::choice`]) is optional in both.
 ///
 /// [`Reflectance`]: crate::model::Reflectance
 /// [`ModelBrdf`]: crate::model::ModelBrdf
@@ -277,16 +372,14 @@ fn build(spec: &PluginSpec, full_text: &str) -> Result<Brdf> {
                 }
             ))
         })?;
-        if !(arg.range.0..=arg.range.1).contains(value) {
-            return Err(bad(format!(
-                "argument {key}={value} of '{}' is outside [{}, {}]",
-                reg.name, arg.range.0, arg.range.1
-            )));
-        }
-        values.insert(arg.name, *value);
+        arg.check(value)
+            .map_err(|reason| bad(format!("'{}': {reason}", reg.name)))?;
+        values.insert(arg.name, value.clone());
     }
     for arg in reg.args {
-        values.entry(arg.name).or_insert(arg.default);
+        values
+            .entry(arg.name)
+            .or_insert_with(|| arg.default_value());
     }
     let canonical = PluginSpec {
         name: reg.name.to_string(),
@@ -297,7 +390,11 @@ fn build(spec: &PluginSpec, full_text: &str) -> Result<Brdf> {
         values: reg
             .args
             .iter()
-            .map(|a| (a.name.to_string(), values[a.name]))
+            .filter(|a| {
+                // A choice at its default is left out (see `ArgKind::Choice`).
+                !matches!(a.kind, ArgKind::Choice { .. }) || values[a.name] != a.default_value()
+            })
+            .map(|a| (a.name.to_string(), values[a.name].clone()))
             .collect(),
     }
     .to_string();

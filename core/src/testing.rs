@@ -77,10 +77,11 @@ pub fn check_model(spec: &str) -> Result<()> {
     check_map_files_round_trip(spec)
 }
 
-/// Every model registered by the crates named (as `module_path!()` spells them), and every
-/// adapter among them wrapped around the first of those models it accepts: the
-/// configurations a plugin crate's tests run (`["coated", "ggx", "lambert", "height(ggx)"]`
-/// for the built-ins).
+/// Every model registered by the crates named (as `module_path!()` spells them), each of its
+/// variants (every non-default word of every choice argument, one argument at a time), and
+/// every adapter among them wrapped around the first of those models it accepts: the
+/// configurations a plugin crate's tests run (`["coated", "ggx",
+/// "ggx(shadowing=correlated)", …, "lambert", "height(ggx)"]` for the built-ins).
 pub fn configurations(crates: &[&str]) -> Result<Vec<String>> {
     let regs: Vec<_> = crate::registrations()?
         .into_iter()
@@ -91,7 +92,19 @@ pub fn configurations(crates: &[&str]) -> Result<Vec<String>> {
         .filter(|r| !r.takes_nested)
         .map(|r| r.name.to_string())
         .collect();
-    let mut out = models.clone();
+    let mut out = Vec::new();
+    for reg in regs.iter().filter(|r| !r.takes_nested) {
+        out.push(reg.name.to_string());
+        for arg in reg.args {
+            if let crate::registry::ArgKind::Choice { words } = arg.kind {
+                out.extend(
+                    words[1..]
+                        .iter()
+                        .map(|w| format!("{}({}={w})", reg.name, arg.name)),
+                );
+            }
+        }
+    }
     for adapter in regs.iter().filter(|r| r.takes_nested) {
         let wrapped = models
             .iter()

@@ -19,7 +19,8 @@ fn with_visible_relief(spec: &str) -> String {
         spec.nested.iter_mut().for_each(relief);
         if spec.name == "height" {
             spec.values.retain(|(k, _)| k != "scale");
-            spec.values.push(("scale".into(), 0.2));
+            spec.values
+                .push(("scale".into(), photomat_core::ArgValue::Number(0.2)));
         }
     }
     let mut parsed = PluginSpec::parse(spec).unwrap();

@@ -70,6 +70,15 @@ fn cli_brdfs_lists_builtins_with_channel_counts() {
     assert_eq!(height["example"]["channels"], 8);
     assert_eq!(height["args"][0]["name"], "scale");
     assert_eq!(height["args"][0]["default"], 0.02);
+    assert_eq!(height["args"][0]["range"], json!([0.0, 1.0]));
+    let shadowing = &by_name("ggx")["args"][0];
+    assert_eq!(shadowing["name"], "shadowing");
+    assert_eq!(shadowing["default"], "separable");
+    assert_eq!(
+        shadowing["choices"],
+        json!(["separable", "correlated", "implicit"])
+    );
+    assert_eq!(shadowing.get("range"), None);
 
     // Parameter tables: every spec field, defaults in their shortest decimal form.
     let roughness = &by_name("ggx")["params"][2];

@@ -123,12 +123,47 @@ fn registry_canonical_names_round_trip() {
 }
 
 #[test]
+fn registry_choice_arguments_are_named_only_when_not_default() {
+    // Names written before `ggx` had choices (estimator.json, material.json) keep naming the
+    // default model, and a variant's name rebuilds the variant.
+    assert_eq!(
+        model("ggx(shadowing=separable, fresnel=schlick)").name(),
+        "ggx"
+    );
+    assert_eq!(
+        model("ggx(fresnel=constant, shadowing=correlated)").name(),
+        "ggx(shadowing=correlated, fresnel=constant)"
+    );
+    assert_eq!(
+        model("height(ggx(shadowing=implicit))").name(),
+        "height(ggx(shadowing=implicit), scale=0.02)"
+    );
+    for spec in ["ggx(shadowing=correlated)", "height(ggx(fresnel=constant))"] {
+        let canonical = model(spec).name();
+        assert_eq!(model(&canonical).name(), canonical, "{spec}");
+    }
+}
+
+#[test]
 fn registry_bad_specifications_explain_themselves() {
     let cases = [
         ("height", "wraps exactly one nested model"),
         ("ggx(lambert)", "takes no nested model"),
         ("height(ggx, depth=2)", "no argument 'depth' (valid: scale)"),
-        ("ggx(scale=1)", "no argument 'scale' (valid: none)"),
+        ("lambert(scale=1)", "no argument 'scale' (valid: none)"),
+        (
+            "ggx(scale=1)",
+            "no argument 'scale' (valid: shadowing, fresnel)",
+        ),
+        (
+            "ggx(shadowing=smith)",
+            "shadowing=smith is not one of: separable, correlated, implicit",
+        ),
+        (
+            "ggx(fresnel=1)",
+            "fresnel=1 is not one of: schlick, constant",
+        ),
+        ("height(ggx, scale=wide)", "scale=wide must be a number"),
         ("height(ggx, scale=5)", "outside [0, 1]"),
         ("height(coated)", "has no 'normal' map to replace"),
         ("height(height(ggx))", "has no 'normal' map to replace"),

@@ -7,7 +7,9 @@ use std::io::Write;
 
 use anyhow::Context;
 use photomat_core::param::total_channels;
-use photomat_core::{BrdfRegistration, ColorSpace, Encoding, ParamSpec, lookup, registrations};
+use photomat_core::{
+    ArgKind, ArgValue, BrdfRegistration, ColorSpace, Encoding, ParamSpec, lookup, registrations,
+};
 use serde::Serialize;
 
 use crate::common::shortest;
@@ -48,8 +50,13 @@ pub struct ModelInfo {
 #[derive(Debug, Serialize)]
 pub struct ArgInfo {
     pub name: &'static str,
-    pub default: f64,
-    pub range: [f64; 2],
+    pub default: ArgValue,
+    /// Numeric arguments: the inclusive valid range.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub range: Option<[f64; 2]>,
+    /// Choice arguments: the words accepted, the default first.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub choices: Option<Vec<&'static str>>,
     pub doc: &'static str,
 }
 
@@ -108,8 +115,15 @@ fn describe(reg: &BrdfRegistration, all: &[&'static BrdfRegistration]) -> ModelI
             .iter()
             .map(|a| ArgInfo {
                 name: a.name,
-                default: a.default,
-                range: [a.range.0, a.range.1],
+                default: a.default_value(),
+                range: match a.kind {
+                    ArgKind::Number { range, .. } => Some([range.0, range.1]),
+                    ArgKind::Choice { .. } => None,
+                },
+                choices: match a.kind {
+                    ArgKind::Choice { words } => Some(words.to_vec()),
+                    ArgKind::Number { .. } => None,
+                },
                 doc: a.doc,
             })
             .collect(),
@@ -227,14 +241,14 @@ pub fn format_text(models: &[ModelInfo]) -> String {
             text.push_str(&format!("  {spec} maps: {}\n", params.join(", ")));
         }
         if !m.args.is_empty() {
-            let mut rows = vec![row(["argument", "default", "range", "description"])];
+            let mut rows = vec![row(["argument", "default", "values", "description"])];
             rows.extend(m.args.iter().map(|a| {
-                row([
-                    a.name,
-                    &a.default.to_string(),
-                    &format!("[{}, {}]", a.range[0], a.range[1]),
-                    a.doc,
-                ])
+                let values = match (&a.range, &a.choices) {
+                    (Some(range), _) => format!("[{}, {}]", range[0], range[1]),
+                    (None, Some(words)) => words.join(" | "),
+                    (None, None) => String::new(),
+                };
+                row([a.name, &a.default.to_string(), &values, a.doc])
             }));
             text.push_str(&table(&rows));
         }

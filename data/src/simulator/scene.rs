@@ -15,7 +15,7 @@
 
 use candle_core::{DType, Device};
 use photomat_core::image_io::PlanarImage;
-use photomat_core::plugin_spec::PluginSpec;
+use photomat_core::plugin_spec::{ArgValue, PluginSpec};
 use photomat_core::registry::registrations;
 use photomat_core::{
     Brdf, Error, FlashGeometry, Highlight, MaterialMaps, Result, lookup, render_radiance_with,
@@ -155,12 +155,20 @@ fn rescale_heights(spec: &PluginSpec, side: f64) -> Result<PluginSpec> {
         .collect::<Result<_>>()?;
     if spec.name == HEIGHT_ADAPTER {
         let scale = match spec.values.iter().find(|(k, _)| k == "scale") {
-            Some((_, v)) => *v,
+            Some((_, ArgValue::Number(v))) => *v,
+            Some((_, word)) => {
+                return Err(Error::Invalid(format!(
+                    "'{spec}': the height adapter's scale={word} must be a number"
+                )));
+            }
             None => registrations()?
                 .iter()
                 .find(|r| r.name == HEIGHT_ADAPTER)
                 .and_then(|r| r.args.iter().find(|a| a.name == "scale"))
-                .map(|a| a.default)
+                .and_then(|a| match a.default_value() {
+                    ArgValue::Number(v) => Some(v),
+                    ArgValue::Word(_) => None,
+                })
                 .ok_or_else(|| {
                     Error::Invalid(format!(
                         "'{spec}' uses the height adapter, but no linked plugin registers \
@@ -169,7 +177,8 @@ fn rescale_heights(spec: &PluginSpec, side: f64) -> Result<PluginSpec> {
                 })?,
         };
         out.values.retain(|(k, _)| k != "scale");
-        out.values.push(("scale".into(), scale / side));
+        out.values
+            .push(("scale".into(), ArgValue::Number(scale / side)));
     }
     Ok(out)
 }
