@@ -86,6 +86,8 @@ enum Command {
     Capture(commands::capture::Args),
     /// Sample materials from a trained model: maps, renders, contact sheet, glTF/MaterialX.
     Sample(commands::sample::Args),
+    /// Speed against accuracy of BRDF models: one estimator each, same budget; table and plot.
+    Trade(commands::trade::Args),
     /// Time whole training and sampling steps (JSON), for comparison with PyTorch.
     Bench(commands::bench::Args),
 }
@@ -107,6 +109,7 @@ impl Command {
             Command::Relight(args) => commands::relight::run(args, out),
             Command::TrainEstimator(args) => commands::train_estimator::run(args, out),
             Command::Sample(args) => commands::sample::run(args, out),
+            Command::Trade(args) => commands::trade::run(args, out),
             Command::Bench(args) => commands::bench::run(args, out),
         }
     }

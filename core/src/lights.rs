@@ -86,6 +86,11 @@ impl LightSet {
         Self { highlights }
     }
 
+    /// Any list of highlights, in order (e.g. the reference five followed by held-out ones).
+    pub fn from_highlights(highlights: Vec<Highlight>) -> Self {
+        Self { highlights }
+    }
+
     /// The same lights for a material of world side `side` instead of the unit square: every
     /// highlight's plane coordinates times `side`, so each keeps its place relative to the
     /// material (a spatial model's N-texel sample covers N × texel size world units).

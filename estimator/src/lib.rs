@@ -16,6 +16,8 @@
 //! - [`loss`]: the Gram (VGG19 or seeded random-feature fallback) and L1 losses of §3.
 //! - [`train`]: the two-stage training against a frozen `GanModel` (aligned, then rolled
 //!   fine-tune), resumable, behind `photomat train-estimator`.
+//! - [`trade`]: the speed/accuracy trade of BRDF models (one E per model, same budget),
+//!   behind `photomat trade`.
 //! - [`circular_conv2d`]: convolution with wrap-around padding ([`conv`]) on
 //!   [`photomat_kernels::conv2d`] (im2col + gemm custom ops; E's layers 2–5× faster forward +
 //!   backward than with candle's CPU `conv2d`). [`conv2d_fast_backward`] ([`conv_grad`])
@@ -52,6 +54,7 @@ pub mod conv;
 pub mod loss;
 pub mod model_files;
 pub mod sample;
+pub mod trade;
 pub mod train;
 pub mod unet;
 pub mod upsample;

@@ -13,5 +13,6 @@ pub mod relight;
 pub mod render;
 pub mod sample;
 pub mod simulate;
+pub mod trade;
 pub mod train_estimator;
 pub mod train_gan;
