@@ -65,12 +65,15 @@ pub const RANGE_TOLERANCE: f32 = 1e-4;
 /// grey texel) carries no direction.
 const MIN_PNG_NORMAL_LENGTH: f32 = 1e-3;
 
-/// How [`save_maps`] writes the PNG files.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+/// How [`save_maps`] writes the PNG files, and what else the manifest records.
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct SaveOptions {
     /// Bits per PNG channel (16 by default: linear maps such as roughness and height band
     /// visibly at 8 bits).
     pub png_bits: PngBits,
+    /// How the model was chosen among several (`photomat sample --brdf auto`), recorded as
+    /// the manifest's `selection`.
+    pub selection: Option<serde_json::Value>,
 }
 
 /// The `material.json` manifest.
@@ -96,6 +99,10 @@ pub struct MapManifest {
     pub texel_size: Option<f64>,
     /// One entry per parameter map, in the model's channel order.
     pub maps: Vec<MapEntry>,
+    /// How the model was chosen among candidates, when it was (the chooser's record: every
+    /// candidate's error and cost, the tolerance). Informational; omitted otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub selection: Option<serde_json::Value>,
 }
 
 /// One map of a [`MapManifest`].
@@ -209,6 +216,7 @@ pub fn save_maps(
         resolution: height,
         texel_size: maps.texel_size(),
         maps: entries,
+        selection: options.selection.clone(),
     };
     let path = dir.join(MANIFEST_FILE);
     let mut text = serde_json::to_string_pretty(&manifest)

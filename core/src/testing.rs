@@ -734,7 +734,10 @@ pub fn check_png_round_trip(spec: &str, bits: PngBits) -> Result<()> {
         dir.path(),
         brdf.as_ref(),
         &maps,
-        &SaveOptions { png_bits: bits },
+        &SaveOptions {
+            png_bits: bits,
+            ..SaveOptions::default()
+        },
     )?;
     drop_exr_entries(dir.path())?;
     let loaded = load_maps(dir.path(), None)?;

@@ -125,7 +125,13 @@ fn map_files_png_round_trip_is_within_quantisation() {
 #[test]
 fn map_files_png_layout_follows_channels_and_bits() {
     for bits in [PngBits::Sixteen, PngBits::Eight] {
-        let (dir, brdf, maps) = saved("ggx", &SaveOptions { png_bits: bits });
+        let (dir, brdf, maps) = saved(
+            "ggx",
+            &SaveOptions {
+                png_bits: bits,
+                ..SaveOptions::default()
+            },
+        );
         for p in brdf.params() {
             let (image, file_bits) = read_png(&dir.path().join(format!("{}.png", p.name))).unwrap();
             assert_eq!(file_bits, bits);

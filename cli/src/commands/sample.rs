@@ -1,5 +1,6 @@
 //! `photomat sample [--model MODEL] --count N --out OUT [--seed S] [--psi ψ] [--tileable]
-//! [--hextile] [--gltf] [--mtlx] [--size-render PX]`: the product's main job, the reference
+//! [--hextile] [--gltf] [--mtlx] [--size-render PX] [--brdf SPEC|auto [--tolerance T]]`: the
+//! product's main job, the reference
 //! tool's sampler. The pipeline is the library's [`photomat_estimator::sample::Sampler`]
 //! (what it writes under `OUT/seed-XXXX/`, the contact sheet and `summary.json` are described
 //! there); this command parses the flags, finds the model folder and shows progress.
@@ -12,8 +13,8 @@ use std::path::{Path, PathBuf};
 use anyhow::bail;
 use candle_core::Device;
 use photomat_estimator::sample::{
-    CONTACT_SHEET_FILE, SHEET_MAX_ROWS, SUMMARY_FILE, SampleEvent, SampleOptions, SampleSummary,
-    Sampler, missing_model_file,
+    BrdfChoice, CONTACT_SHEET_FILE, DEFAULT_TOLERANCE, SHEET_MAX_ROWS, SUMMARY_FILE, SampleEvent,
+    SampleOptions, SampleSummary, Sampler, missing_model_file,
 };
 
 use crate::common::progress_bar;
@@ -94,6 +95,17 @@ pub struct Args {
     /// summary.json; nothing else); without it a folder holding samples is refused.
     #[arg(long)]
     pub overwrite: bool,
+
+    /// BRDF model of the maps: one the model folder has an estimator for (its root one by
+    /// default, others under estimators/<name>/), or `auto`: per material, the cheapest model
+    /// (fewest map channels) whose L1 against M's relighting is within --tolerance of the best
+    /// one's. material.json records the choice and every candidate's error.
+    #[arg(long, value_name = "SPEC|auto")]
+    pub brdf: Option<String>,
+
+    /// With --brdf auto: accepted L1 above the best model's, relative (0.1 = 10 %).
+    #[arg(long, value_name = "T", default_value_t = DEFAULT_TOLERANCE)]
+    pub tolerance: f64,
 }
 
 /// The model folder to use: `--model`, else `$PHOTOMAT_MODEL`, else the bundled one; an error
@@ -133,6 +145,10 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         size: args.size.map(|s| s as usize),
         render_size: args.size_render.map(|s| s as usize),
         overwrite: args.overwrite,
+        brdf: match &args.brdf {
+            Some(text) => BrdfChoice::parse(text, args.tolerance)?,
+            None => BrdfChoice::Default,
+        },
     };
     let bar = progress_bar(
         args.count as u64,
@@ -200,5 +216,18 @@ fn report(
         summary.l1_mean,
         summary.materials_per_minute
     )?;
+    if summary.brdf == "auto" {
+        let counts: Vec<String> = summary
+            .brdf_counts
+            .iter()
+            .map(|(brdf, n)| format!("{n} × {brdf}"))
+            .collect();
+        writeln!(
+            out,
+            "  --brdf auto (tolerance {}): {}",
+            args.tolerance,
+            counts.join(", ")
+        )?;
+    }
     Ok(())
 }

@@ -44,6 +44,7 @@
 //! # Ok::<(), anyhow::Error>(())
 //! ```
 
+pub mod choice;
 pub mod hextile;
 pub mod summary;
 
@@ -63,6 +64,7 @@ use photomat_generator::model_files::GAN_MANIFEST_FILE;
 
 use crate::EstimatorModel;
 use crate::model_files::ESTIMATOR_MANIFEST_FILE;
+pub use choice::{BrdfChoice, Candidate, DEFAULT_TOLERANCE, ESTIMATORS_DIR, Selection};
 pub use summary::{MaterialSummary, SampleSummary, Timings};
 
 /// Materials shown in the contact sheet (the first ones of the run): 64 rows of 128-pixel
@@ -73,7 +75,7 @@ pub const SHEET_MAX_ROWS: usize = 64;
 pub const SHEET_MAX_TILE: usize = 128;
 
 /// Texels relit and rendered per call: all 5 lights at up to 512² (≈ 1.3 M texels, a few
-/// hundred MB of intermediates), one light at a time above.
+/// hundred MB of intermediates), fewer lights at a time above.
 pub const LIGHT_BATCH_TEXELS: usize = 5 * 512 * 512;
 
 /// Name of the contact sheet in the output folder.
@@ -112,6 +114,8 @@ pub struct SampleOptions {
     /// sheet and summary); without it a folder that holds samples is refused, so that two
     /// runs never mix and summary.json lists every seed folder there.
     pub overwrite: bool,
+    /// Which estimator, and so which BRDF model, each material gets ([`choice`]).
+    pub brdf: BrdfChoice,
 }
 
 impl Default for SampleOptions {
@@ -127,6 +131,7 @@ impl Default for SampleOptions {
             size: None,
             render_size: None,
             overwrite: false,
+            brdf: BrdfChoice::Default,
         }
     }
 }
@@ -144,7 +149,9 @@ pub enum SampleEvent {
 pub struct Sampler {
     dir: PathBuf,
     gan: GanModel,
-    estimator: EstimatorModel,
+    /// The root estimator first, then those of `estimators/*/`, cheapest first
+    /// ([`choice::load_estimators`]).
+    estimators: Vec<EstimatorModel>,
     /// Seconds spent loading.
     load_seconds: f64,
 }
@@ -159,26 +166,17 @@ pub fn missing_model_file(dir: &Path) -> Option<&'static str> {
 
 impl Sampler {
     /// Loads the model folder `dir` (gan.json + gan.safetensors, estimator.json +
-    /// estimator.safetensors) and checks that E reads the features G produces.
+    /// estimator.safetensors, and any `estimators/*/`) and checks that every E reads the
+    /// features G produces.
     pub fn open(dir: &Path, device: &Device) -> anyhow::Result<Self> {
         let start = Instant::now();
         let gan = GanModel::load(dir, device)
             .with_context(|| format!("cannot load the GAN model in '{}'", dir.display()))?;
-        let estimator = EstimatorModel::load(dir, device)
-            .with_context(|| format!("cannot load the estimator in '{}'", dir.display()))?;
-        let in_channels = estimator.estimator().config().in_channels;
-        let features = gan.config().feature_channels;
-        if in_channels != features {
-            bail!(
-                "the estimator in '{}' reads {in_channels} feature channels but the GAN produces \
-                 {features} (estimator.json and gan.json come from different runs)",
-                dir.display()
-            );
-        }
+        let estimators = choice::load_estimators(dir, gan.config().feature_channels, device)?;
         Ok(Self {
             dir: dir.to_path_buf(),
             gan,
-            estimator,
+            estimators,
             load_seconds: start.elapsed().as_secs_f64(),
         })
     }
@@ -188,9 +186,55 @@ impl Sampler {
         &self.gan
     }
 
-    /// The estimator E with its BRDF model.
+    /// The default (root) estimator E with its BRDF model.
     pub fn estimator(&self) -> &EstimatorModel {
-        &self.estimator
+        &self.estimators[0]
+    }
+
+    /// Every estimator of the folder: the default first, then the others cheapest first.
+    pub fn estimators(&self) -> &[EstimatorModel] {
+        &self.estimators
+    }
+
+    /// The estimators `choice` draws on, cheapest first for auto; an error naming the
+    /// available models when a named one is missing.
+    pub fn candidates(&self, choice: &BrdfChoice) -> anyhow::Result<Vec<&EstimatorModel>> {
+        match choice {
+            BrdfChoice::Default => Ok(vec![&self.estimators[0]]),
+            BrdfChoice::Named(spec) => {
+                let name = photomat_core::lookup(spec)
+                    .with_context(|| format!("invalid --brdf '{spec}'"))?
+                    .name();
+                self.estimators
+                    .iter()
+                    .find(|e| e.brdf().name() == name)
+                    .map(|e| vec![e])
+                    .with_context(|| {
+                        format!(
+                            "the model folder '{}' has no estimator for '{name}'; it has: {} \
+                             (train one with `photomat train-estimator --gan {} --brdf '{name}'` \
+                             and put its estimator.json and estimator.safetensors in {}/<name>/)",
+                            self.dir.display(),
+                            self.brdf_names().join(", "),
+                            self.dir.display(),
+                            ESTIMATORS_DIR
+                        )
+                    })
+            }
+            BrdfChoice::Auto { .. } => {
+                let mut all: Vec<&EstimatorModel> = self.estimators.iter().collect();
+                all.sort_by(|a, b| {
+                    (a.brdf().channels(), a.brdf().name())
+                        .cmp(&(b.brdf().channels(), b.brdf().name()))
+                });
+                Ok(all)
+            }
+        }
+    }
+
+    /// The BRDF models of the folder's estimators, default first.
+    pub fn brdf_names(&self) -> Vec<String> {
+        self.estimators.iter().map(|e| e.brdf().name()).collect()
     }
 
     /// The lights of the neural and analytic renders: the reference's five, placed relative
@@ -206,7 +250,11 @@ impl Sampler {
     pub fn material_side(&self, size: Option<usize>) -> anyhow::Result<usize> {
         let config = self.gan.config();
         let side = config.sample_side(size)?;
-        let stride = self.estimator.estimator().config().total_stride();
+        let stride = self
+            .estimators
+            .iter()
+            .map(|e| e.estimator().config().total_stride())
+            .fold(1, |a, b| a * b / gcd(a, b));
         if side % stride != 0 {
             let step = stride * config.cell_size() / gcd(stride, config.cell_size());
             bail!(
@@ -247,8 +295,11 @@ impl Sampler {
                 self.dir.display()
             );
         }
-        let brdf = self.estimator.brdf().clone();
-        let inner = brdf.innermost();
+        let candidates = self.candidates(&options.brdf)?;
+        let tolerance = match options.brdf {
+            BrdfChoice::Auto { tolerance } => Some(tolerance),
+            _ => None,
+        };
         let resolution = self.material_side(options.size)?;
         let lights = self.lights();
         let world_side = config.world_side(resolution)?;
@@ -269,8 +320,8 @@ impl Sampler {
         let job = Job {
             sampler: self,
             options,
-            brdf: &brdf,
-            inner: &inner,
+            candidates: &candidates,
+            tolerance,
             geometry: &geometry,
             size: resolution,
             tile: options.render_size.unwrap_or(resolution),
@@ -306,14 +357,17 @@ impl Sampler {
         let stage = Instant::now();
         write_png(
             &out.join(CONTACT_SHEET_FILE),
-            &grid(&rows, 0.0)?,
+            &grid(&aligned_rows(rows), 0.0)?,
             PngBits::Eight,
         )?;
         timings.write += stage.elapsed().as_secs_f64();
         timings.total = self.load_seconds + start.elapsed().as_secs_f64();
         let summary = SampleSummary::new(
             self.dir.display().to_string(),
-            brdf.name(),
+            match tolerance {
+                Some(_) => "auto".to_string(),
+                None => candidates[0].brdf().name(),
+            },
             resolution,
             options.psi,
             config.tileable,
@@ -332,8 +386,9 @@ impl Sampler {
 struct Job<'a> {
     sampler: &'a Sampler,
     options: &'a SampleOptions,
-    brdf: &'a Brdf,
-    inner: &'a Brdf,
+    /// The estimators to draw on: one, or with `tolerance` (auto) every one, cheapest first.
+    candidates: &'a [&'a EstimatorModel],
+    tolerance: Option<f64>,
     geometry: &'a FlashGeometry,
     /// Side of each material in texels.
     size: usize,
@@ -344,7 +399,7 @@ struct Job<'a> {
 /// One sampled material: its summary and, when asked for, its contact-sheet row.
 struct Material {
     summary: MaterialSummary,
-    sheet_row: Option<Vec<PlanarImage>>,
+    sheet_row: Option<SheetRow>,
 }
 
 impl Job<'_> {
@@ -358,24 +413,54 @@ impl Job<'_> {
         timings: &mut Timings,
         exported: &mut dyn FnMut(&photomat_export::TextureSet) -> anyhow::Result<()>,
     ) -> anyhow::Result<Material> {
-        let (gan, options, brdf) = (&self.sampler.gan, self.options, self.brdf);
+        let (gan, options) = (&self.sampler.gan, self.options);
         let stage = Instant::now();
         let features = gan.features_for_seeds_at(&[seed], options.psi, self.size)?;
         timings.generate += stage.elapsed().as_secs_f64();
-        let stage = Instant::now();
-        let maps = self
-            .sampler
-            .estimator
-            .estimate(&features)?
-            .with_texel_size(gan.config().map_texel_size());
-        timings.estimate += stage.elapsed().as_secs_f64();
-        let (neural, analytic) = self.renders(&features, &maps, timings)?;
-        let l1: Vec<f64> = (analytic.clone() - &neural)?
-            .abs()?
-            .flatten_from(1)?
-            .mean(1)?
-            .to_dtype(DType::F64)?
-            .to_vec1()?;
+        let neural = self.neural(&features, timings)?;
+        // Every candidate decodes and renders the material; one is kept.
+        let mut scored = Vec::new();
+        for estimator in self.candidates {
+            let stage = Instant::now();
+            let maps = estimator
+                .estimate(&features)?
+                .with_texel_size(gan.config().map_texel_size());
+            timings.estimate += stage.elapsed().as_secs_f64();
+            let analytic = self.analytic(estimator.brdf(), &maps, timings)?;
+            let l1: Vec<f64> = (analytic.clone() - &neural)?
+                .abs()?
+                .flatten_from(1)?
+                .mean(1)?
+                .to_dtype(DType::F64)?
+                .to_vec1()?;
+            scored.push((estimator, maps, analytic, l1));
+        }
+        let mean = |l1: &[f64]| l1.iter().sum::<f64>() / l1.len() as f64;
+        let (chosen, selection) = match self.tolerance {
+            None => (0, None),
+            Some(tolerance) => {
+                let candidates: Vec<Candidate> = scored
+                    .iter()
+                    .map(|(e, _, _, l1)| Candidate {
+                        brdf: e.brdf().name(),
+                        channels: e.brdf().channels(),
+                        l1: mean(l1),
+                    })
+                    .collect();
+                let k = choice::choose(&candidates, tolerance).with_context(|| {
+                    format!("seed {seed}: no model renders the material with a finite error")
+                })?;
+                let selection = Selection {
+                    chosen: candidates[k].brdf.clone(),
+                    tolerance,
+                    candidates,
+                };
+                (k, Some(selection))
+            }
+        };
+        let (estimator, maps, analytic, l1) = scored.swap_remove(chosen);
+        let brdf = estimator.brdf();
+        let inner = brdf.innermost();
 
         let stage = Instant::now();
         let tile = self.tile;
@@ -389,11 +474,11 @@ impl Job<'_> {
         if let Some(shading) = &extras {
             if options.tileable {
                 let repeated = shading.map_tensors(|t| Ok(t.repeat((1, 1, 2, 2))?))?;
-                tiled = Some(centre_render(self.inner, &repeated, 2 * tile)?);
+                tiled = Some(centre_render(&inner, &repeated, 2 * tile)?);
             }
             if options.hextile {
-                let maps2 = hextile::hextile_maps(self.inner, shading, seed)?;
-                hex = Some((centre_render(self.inner, &maps2, 2 * tile)?, maps2));
+                let maps2 = hextile::hextile_maps(&inner, shading, seed)?;
+                hex = Some((centre_render(&inner, &maps2, 2 * tile)?, maps2));
             }
         }
         timings.extras += stage.elapsed().as_secs_f64();
@@ -403,7 +488,10 @@ impl Job<'_> {
             &folder.join("material"),
             brdf.as_ref(),
             &maps,
-            &SaveOptions::default(),
+            &SaveOptions {
+                selection: selection.as_ref().map(serde_json::to_value).transpose()?,
+                ..SaveOptions::default()
+            },
         )
         .with_context(|| format!("cannot write the maps of seed {seed}"))?;
         let strip = |tiles: &[PlanarImage]| grid(&[tiles.to_vec()], 0.0);
@@ -424,7 +512,7 @@ impl Job<'_> {
             write_png(&folder.join("hextile_2x2.png"), image, PngBits::Eight)?;
             save_maps(
                 &folder.join("material_hextile_2x2"),
-                self.inner.as_ref(),
+                inner.as_ref(),
                 maps2,
                 &SaveOptions::default(),
             )?;
@@ -448,9 +536,13 @@ impl Job<'_> {
                 .into_iter()
                 .map(|(_, p)| resize_square(&p, sheet_tile))
                 .collect();
+            let previews = row.len();
             row.extend(analytic_tiles.iter().map(|t| resize_square(t, sheet_tile)));
             row.extend(neural_tiles.iter().map(|t| resize_square(t, sheet_tile)));
-            Some(row)
+            Some(SheetRow {
+                tiles: row,
+                previews,
+            })
         } else {
             None
         };
@@ -458,6 +550,8 @@ impl Job<'_> {
             summary: MaterialSummary {
                 seed,
                 folder: folder.display().to_string(),
+                brdf: brdf.name(),
+                selection,
                 l1_mean: l1.iter().sum::<f64>() / l1.len() as f64,
                 l1_per_light: l1,
             },
@@ -465,44 +559,84 @@ impl Job<'_> {
         })
     }
 
-    /// M's relighting of `features` and the analytic render of `maps` under every light, both
-    /// display-encoded in [0, 1], from the one geometry of the run.
+    /// Texels relit or rendered per call: all lights at up to 512² (≈ 1.3 M texels, a few
+    /// hundred MB of intermediates), fewer lights at a time above (5 lights of a 1024²
+    /// material would hold gigabytes at once).
+    fn lights_per_call(&self) -> anyhow::Result<usize> {
+        let lights = self.geometry.omega.dim(0)?;
+        Ok((LIGHT_BATCH_TEXELS / (self.size * self.size)).clamp(1, lights))
+    }
+
+    /// M's relighting of `features` under every light, display-encoded in [0, 1].
     ///
     /// # Shapes
-    /// features (1, F, R, R), maps (1, C, R, R) → two (lights, 3, R, R).
-    fn renders(
-        &self,
-        features: &Tensor,
-        maps: &MaterialMaps,
-        timings: &mut Timings,
-    ) -> anyhow::Result<(Tensor, Tensor)> {
-        let resolution = features.dim(3)?;
+    /// features (1, F, R, R) → (lights, 3, R, R).
+    fn neural(&self, features: &Tensor, timings: &mut Timings) -> anyhow::Result<Tensor> {
         let lights = self.geometry.omega.dim(0)?;
-        // Lights in groups of at most LIGHT_BATCH_TEXELS texels: M's and the renderer's
-        // intermediates scale with the batch (5 lights of a 1024² material would hold
-        // gigabytes at once); materials up to 512² keep one call for all lights.
-        let per_call = (LIGHT_BATCH_TEXELS / (resolution * resolution)).clamp(1, lights);
+        let per_call = self.lights_per_call()?;
         let mut neural = Vec::new();
-        let mut analytic = Vec::new();
+        let relight = Instant::now();
         for first in (0..lights).step_by(per_call) {
             let n = per_call.min(lights - first);
             let group = self.geometry.narrow(first, n)?;
             let repeated = features.repeat((n, 1, 1, 1))?;
-            let relight = Instant::now();
             neural.push(
                 self.sampler
                     .gan
                     .relight()
                     .forward(&repeated, &group.omega)?,
             );
-            timings.relight += relight.elapsed().as_secs_f64();
-            let shade = Instant::now();
-            analytic.push(render_with(self.brdf.as_ref(), maps, &group)?);
-            timings.render += shade.elapsed().as_secs_f64();
         }
-        let neural = Tensor::cat(&neural, 0)?.affine(0.5, 0.5)?.clamp(0.0, 1.0)?;
-        Ok((neural, Tensor::cat(&analytic, 0)?))
+        timings.relight += relight.elapsed().as_secs_f64();
+        Ok(Tensor::cat(&neural, 0)?.affine(0.5, 0.5)?.clamp(0.0, 1.0)?)
     }
+
+    /// The analytic render of `maps` in `brdf` under every light, display-encoded in [0, 1],
+    /// from the one geometry of the run.
+    ///
+    /// # Shapes
+    /// maps (1, C, R, R) → (lights, 3, R, R).
+    fn analytic(
+        &self,
+        brdf: &Brdf,
+        maps: &MaterialMaps,
+        timings: &mut Timings,
+    ) -> anyhow::Result<Tensor> {
+        let lights = self.geometry.omega.dim(0)?;
+        let per_call = self.lights_per_call()?;
+        let mut analytic = Vec::new();
+        let shade = Instant::now();
+        for first in (0..lights).step_by(per_call) {
+            let group = self.geometry.narrow(first, per_call.min(lights - first))?;
+            analytic.push(render_with(brdf.as_ref(), maps, &group)?);
+        }
+        timings.render += shade.elapsed().as_secs_f64();
+        Ok(Tensor::cat(&analytic, 0)?)
+    }
+}
+
+/// One material's contact-sheet row: its map previews, then its renders.
+struct SheetRow {
+    tiles: Vec<PlanarImage>,
+    /// How many of `tiles` are map previews.
+    previews: usize,
+}
+
+/// The rows as one grid's rows, black tiles inserted after the previews of a model with fewer
+/// maps (auto mixes models) so that every row's renders share columns.
+fn aligned_rows(rows: Vec<SheetRow>) -> Vec<Vec<PlanarImage>> {
+    let most = rows.iter().map(|r| r.previews).max().unwrap_or(0);
+    rows.into_iter()
+        .map(|mut row| {
+            if let Some(first) = row.tiles.first() {
+                let blank = PlanarImage::filled(first.channels, first.height, first.width, 0.0);
+                let at = row.previews;
+                row.tiles
+                    .splice(at..at, std::iter::repeat_n(blank, most - row.previews));
+            }
+            row.tiles
+        })
+        .collect()
 }
 
 /// Greatest common divisor (Euclid).

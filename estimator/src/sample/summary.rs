@@ -37,6 +37,11 @@ pub struct MaterialSummary {
     pub seed: u64,
     /// Its folder, `OUT/seed-XXXX`.
     pub folder: String,
+    /// The BRDF model of its maps.
+    pub brdf: String,
+    /// How that model was chosen (`--brdf auto` only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub selection: Option<super::Selection>,
     /// L1 analytic vs neural per light, display-encoded [0, 1].
     pub l1_per_light: Vec<f64>,
     /// Mean of [`Self::l1_per_light`].
@@ -48,8 +53,11 @@ pub struct MaterialSummary {
 pub struct SampleSummary {
     /// The model folder.
     pub model: String,
-    /// The estimator's BRDF model specification.
+    /// The estimator's BRDF model specification, or `auto` (each material's is in
+    /// [`MaterialSummary::brdf`]).
     pub brdf: String,
+    /// How many materials got each model.
+    pub brdf_counts: std::collections::BTreeMap<String, usize>,
     /// Side of F and of the maps, texels.
     pub resolution: usize,
     /// Truncation ψ.
@@ -93,9 +101,14 @@ impl SampleSummary {
         let l1_mean = l1_per_light.iter().sum::<f64>() / l1_per_light.len() as f64;
         // The floor keeps the rate finite for a run too fast to time.
         let materials_per_minute = 60.0 * n / timings.per_material().max(f64::MIN_POSITIVE);
+        let mut brdf_counts = std::collections::BTreeMap::new();
+        for m in &materials {
+            *brdf_counts.entry(m.brdf.clone()).or_insert(0) += 1;
+        }
         Self {
             model,
             brdf,
+            brdf_counts,
             resolution,
             psi,
             tileable_model,
@@ -119,6 +132,8 @@ mod tests {
         let m = |seed, l1: Vec<f64>| MaterialSummary {
             seed,
             folder: String::new(),
+            brdf: "ggx".into(),
+            selection: None,
             l1_mean: l1.iter().sum::<f64>() / l1.len() as f64,
             l1_per_light: l1,
         };
@@ -139,6 +154,7 @@ mod tests {
             timings,
         );
         assert_eq!(s.seeds, vec![3, 4]);
+        assert_eq!(s.brdf_counts.get("ggx"), Some(&2));
         assert!((s.l1_per_light[0] - 0.2).abs() < 1e-12);
         assert!((s.l1_per_light[1] - 0.4).abs() < 1e-12);
         assert!((s.l1_mean - 0.3).abs() < 1e-12);
