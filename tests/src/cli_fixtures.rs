@@ -1,5 +1,6 @@
 //! Fixtures of the command-line integration tests: `photomat` run in process, an untrained
-//! tiny GAN model folder, and a tiny simulated, prepared flash-photo data set.
+//! tiny GAN model folder, the tiny estimator architecture, and a tiny simulated, prepared
+//! flash-photo data set.
 
 use std::path::{Path, PathBuf};
 
@@ -27,6 +28,18 @@ pub fn photomat_error(args: &[&str]) -> String {
 /// A path as the `&str` the command line takes.
 pub fn path_str(p: &Path) -> &str {
     p.to_str().expect("UTF-8 temp path")
+}
+
+/// The tiny estimator architecture of the tests: reads [`tiny_gan_config`]'s 8 feature
+/// channels, two levels, `out_channels` maps.
+pub fn tiny_estimator_config(out_channels: usize) -> photomat_estimator::EstimatorConfig {
+    photomat_estimator::EstimatorConfig {
+        in_channels: 8,
+        encoder_channels: vec![4, 8],
+        decoder_channels: vec![4],
+        out_channels,
+        ..Default::default()
+    }
 }
 
 /// The tiny GAN architecture of the tests (seconds per training step), at side `resolution`.

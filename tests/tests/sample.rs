@@ -11,9 +11,9 @@ use candle_nn::VarMap;
 use photomat_core::image_io::png_header;
 use photomat_core::lookup;
 use photomat_core::map_files::load_maps;
-use photomat_estimator::{EstimatorConfig, EstimatorModel};
+use photomat_estimator::EstimatorModel;
 use photomat_generator::{GanModel, GeneratorConfig};
-use photomat_tests::cli_fixtures::tiny_gan_config;
+use photomat_tests::cli_fixtures::{tiny_estimator_config, tiny_gan_config};
 use serde_json::Value;
 
 /// A tiny untrained model folder (G/M seeded; E saved once and the folder reused, as its
@@ -30,13 +30,7 @@ fn tiny_model(tileable: bool) -> tempfile::TempDir {
         .save(dir, Value::Null)
         .unwrap();
     let brdf = lookup("height(ggx)").unwrap();
-    let e_config = EstimatorConfig {
-        in_channels: 8,
-        encoder_channels: vec![4, 8],
-        decoder_channels: vec![4],
-        out_channels: brdf.channels(),
-        ..EstimatorConfig::default()
-    };
+    let e_config = tiny_estimator_config(brdf.channels());
     EstimatorModel::new(brdf, e_config, VarMap::new(), &Device::Cpu)
         .unwrap()
         .save(dir, Value::Null)

@@ -9,9 +9,11 @@ use std::path::Path;
 use candle_core::Device;
 use photomat_core::lookup;
 use photomat_core::map_files::load_maps;
-use photomat_estimator::{EstimatorConfig, EstimatorModel};
+use photomat_estimator::EstimatorModel;
 use photomat_generator::GanModel;
-use photomat_tests::cli_fixtures::{path_str as s, photomat, photomat_error, tiny_gan_config};
+use photomat_tests::cli_fixtures::{
+    path_str as s, photomat, photomat_error, tiny_estimator_config, tiny_gan_config,
+};
 use serde_json::Value;
 
 /// A tiny untrained model folder with an estimator for each of `specs` (the first at the root).
@@ -22,13 +24,7 @@ fn model_with_estimators(dir: &Path, specs: &[&str]) {
         .unwrap();
     for (k, spec) in specs.iter().enumerate() {
         let brdf = lookup(spec).unwrap();
-        let config = EstimatorConfig {
-            in_channels: 8,
-            encoder_channels: vec![4, 8],
-            decoder_channels: vec![4],
-            out_channels: brdf.channels(),
-            ..EstimatorConfig::default()
-        };
+        let config = tiny_estimator_config(brdf.channels());
         let folder = if k == 0 {
             dir.to_path_buf()
         } else {
@@ -39,6 +35,13 @@ fn model_with_estimators(dir: &Path, specs: &[&str]) {
             .save(&folder, Value::Null)
             .unwrap();
     }
+}
+
+/// `sample` of one material of `model` into `out` in the BRDF model `brdf`.
+fn sample_one<'a>(model: &'a str, out: &'a str, brdf: &'a str) -> [&'a str; 9] {
+    [
+        "sample", "--model", model, "--count", "1", "--out", out, "--brdf", brdf,
+    ]
 }
 
 fn read_json(path: &Path) -> Value {
@@ -124,33 +127,12 @@ fn sample_named_brdf_uses_that_estimator_or_names_the_ones_present() {
     let model = temp.path().join("model");
     model_with_estimators(&model, &["height(ggx)", "lambert"]);
     let out = temp.path().join("named");
-    photomat(&[
-        "sample",
-        "--model",
-        s(&model),
-        "--count",
-        "1",
-        "--out",
-        s(&out),
-        "--brdf",
-        "lambert",
-    ])
-    .unwrap();
+    photomat(&sample_one(s(&model), s(&out), "lambert")).unwrap();
     let manifest = read_json(&out.join("seed-0000/material/material.json"));
     assert_eq!(manifest["brdf"], "lambert");
     assert!(manifest.get("selection").is_none());
 
-    let err = photomat_error(&[
-        "sample",
-        "--model",
-        s(&model),
-        "--count",
-        "1",
-        "--out",
-        s(&temp.path().join("x")),
-        "--brdf",
-        "coated",
-    ]);
+    let err = photomat_error(&sample_one(s(&model), s(&temp.path().join("x")), "coated"));
     assert!(
         err.contains("no estimator for 'coated'")
             && err.contains("height(ggx, scale=0.02), lambert"),
