@@ -66,6 +66,14 @@ DRIFT_RENDER = 5e-6  # render radiance, relative
 CROSS_REL = 4e-6
 
 GGX_PARAMS = [("diffuse", 3), ("specular", 3), ("roughness", 1), ("normal", 3)]
+GGX_ANISO_PARAMS = [
+    ("diffuse", 3),
+    ("specular", 3),
+    ("roughness_t", 1),
+    ("roughness_b", 1),
+    ("angle", 1),
+    ("normal", 3),
+]
 # Variants of `ggx` (its choice arguments; docs/plugins.md, "Model variants"). Mitsuba has no
 # plugin for them, so their references come from the composed model alone, with Mitsuba's own
 # `smith_g1` for the height-correlated term: (golden stem, specification, choices).
@@ -194,6 +202,21 @@ def random_ggx_case(rnd, collocated):
     return {"tag": tag, "wi": wi, "wo": wo, "params": params}
 
 
+def random_aniso_case(rnd, collocated):
+    """A random `ggx` case with two roughnesses (within 2× of each other) and a tangent angle
+    instead of one roughness."""
+    case = random_ggx_case(rnd, collocated)
+    params = case["params"]
+    params["roughness_t"] = params.pop("roughness")
+    # Up to 2× the tangent's roughness either way: strong anisotropy at low roughness makes D's
+    # slope in the angle too steep for float32 to resolve to the strict tolerance.
+    r_t = params["roughness_t"][0]
+    params["roughness_b"] = [f32(min(1.0, max(RANDOM_ROUGHNESS_MIN, r_t * math.exp(rnd.uniform(-0.7, 0.7)))))]
+    params["angle"] = [f32(rnd.uniform(0.0, 1.0))]
+    case["params"] = {name: params[name] for name, _ in GGX_ANISO_PARAMS}
+    return case
+
+
 def random_coated_case(rnd, collocated):
     while True:
         wi = v32(random_direction(rnd, Z, 0.05, 1.0))
@@ -283,6 +306,48 @@ def extreme_ggx_cases():
     return out
 
 
+def extreme_aniso_cases():
+    """`ggx`'s tagged extremes with α_b ≠ α_t and a tilted tangent, plus the anisotropy's own:
+    equal roughnesses, one roughness at the floor and one at 1, angles 0, ½ and 1."""
+    out = []
+    for c in extreme_ggx_cases():
+        params = dict(c["params"])
+        r = params.pop("roughness")
+        params["roughness_t"] = r
+        params["roughness_b"] = [f32(min(1.0, 0.5 * r[0] + 0.3))]
+        params["angle"] = [f32(0.3)]
+        out.append({**c, "params": {name: params[name] for name, _ in GGX_ANISO_PARAMS}})
+    base = {"diffuse": v32([0.2, 0.5, 0.8]), "specular": v32([0.9, 0.6, 0.04]), "normal": Z}
+    for tag, rt, rb, angle, wi, wo in [
+        ("aniso_isotropic", 0.4, 0.4, 0.7, at(0.8, 20), at(0.6, 160)),
+        ("aniso_floor_along", 0.0, 1.0, 0.25, at(0.9, 10), at(0.7, 200)),
+        ("aniso_floor_across", 1.0, 0.0, 0.25, at(0.9, 10), at(0.7, 200)),
+        ("aniso_angle_zero", 0.1, 0.6, 0.0, at(0.7, 30), at(0.7, 30)),
+        ("aniso_angle_half", 0.1, 0.6, 0.5, at(0.7, 30), at(0.7, 30)),
+        ("aniso_angle_one", 0.1, 0.6, 1.0, at(0.7, 30), at(0.7, 30)),
+        ("aniso_grazing_collocated", 0.2, 0.9, 0.4, at(1e-3, 70), at(1e-3, 70)),
+    ]:
+        params = {**base, "roughness_t": [f32(rt)], "roughness_b": [f32(rb)], "angle": [f32(angle)]}
+        out.append(
+            {"tag": tag, "wi": v32(wi), "wo": v32(wo), "params": {n: params[n] for n, _ in GGX_ANISO_PARAMS}}
+        )
+    tilted_n = v32(tilted(40, 30))
+    params = {**base, "normal": tilted_n, "roughness_t": [f32(0.15)], "roughness_b": [f32(0.7)], "angle": [f32(0.6)]}
+    out.append(
+        {
+            "tag": "aniso_tilted_normal",
+            "wi": v32(at(0.8, 20, axis=normalize(tilted_n))),
+            "wo": v32(at(0.7, 230, axis=normalize(tilted_n))),
+            "params": {n: params[n] for n, _ in GGX_ANISO_PARAMS},
+        }
+    )
+    return out
+
+
+def params_of(model):
+    return {"ggx": GGX_PARAMS, "ggx_aniso": GGX_ANISO_PARAMS, "coated": COATED_PARAMS}[model]
+
+
 def extreme_coated_cases():
     d0, s0, t0 = v32([0.3, 0.1, 0.05]), v32([0.8, 0.5, 0.2]), v32([0.04, 0.04, 0.04])
     out = []
@@ -337,7 +402,9 @@ def extreme_coated_cases():
 
 
 def lobes_of(model):
-    return [("specular", "roughness")] if model == "ggx" else [("specular", "roughness"), ("specular2", "roughness2")]
+    if model in ("ggx", "ggx_aniso"):
+        return [("specular", "roughness")]  # ggx_aniso reads roughness_t and roughness_b
+    return [("specular", "roughness"), ("specular2", "roughness2")]
 
 
 def principled_alpha_matters(model, params):
@@ -387,7 +454,7 @@ def composed(model, cases, alpha_floor=None, grad_channel=None, variant=None):
     "wi", "wo") to per-channel lists when `grad_channel` is given (reverse mode from the sum over
     cases of output channel `grad_channel`: cases are independent, so this is per-case)."""
     mi.set_variant("llvm_ad_rgb")
-    names = [name for name, _ in (GGX_PARAMS if model == "ggx" else COATED_PARAMS)]
+    names = [name for name, _ in params_of(model)]
 
     def color(key):
         return mi.Color3f(*[[c["params"][key][k] for c in cases] for k in range(3)])
@@ -397,7 +464,7 @@ def composed(model, cases, alpha_floor=None, grad_channel=None, variant=None):
         "wo": mi.Vector3f(*[[c["wo"][k] for c in cases] for k in range(3)]),
     }
     for name in names:
-        if name.startswith("roughness"):
+        if name.startswith("roughness") or name == "angle":
             inputs[name] = mi.Float([c["params"][name][0] for c in cases])
         elif name == "normal":
             inputs[name] = mi.Vector3f(*[[c["params"]["normal"][k] for c in cases] for k in range(3)])
@@ -408,7 +475,15 @@ def composed(model, cases, alpha_floor=None, grad_channel=None, variant=None):
             dr.enable_grad(v)
 
     wi, wo = inputs["wi"], inputs["wo"]
-    if "normal" in inputs:
+    if model == "ggx_aniso":
+        # The tangent frame of `ggx_aniso`: t₀ = (cos πa, sin πa, 0) made perpendicular to n.
+        n = dr.normalize(inputs["normal"])
+        theta = inputs["angle"] * dr.pi
+        t0 = mi.Vector3f(dr.cos(theta), dr.sin(theta), 0.0)
+        t = dr.normalize(t0 - n * dr.dot(n, t0))
+        frame = mi.Frame3f(t, dr.cross(n, t), n)
+        wi, wo = frame.to_local(wi), frame.to_local(wo)
+    elif "normal" in inputs:
         frame = mi.Frame3f(dr.normalize(inputs["normal"]))
         wi, wo = frame.to_local(wi), frame.to_local(wo)
     cos_i, cos_o = wi.z, wo.z
@@ -419,10 +494,16 @@ def composed(model, cases, alpha_floor=None, grad_channel=None, variant=None):
     h = dr.normalize(wi + wo)
     compatible = (dr.dot(wi, h) > 0) & (dr.dot(wo, h) > 0)
     for spec, rough in lobes_of(model):
-        alpha = dr.square(inputs[rough])
-        if alpha_floor is not None:
-            alpha = dr.maximum(alpha, alpha_floor)  # principled's floor, emulated
-        dist = mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha)  # clamps α ≥ 1e-4 itself
+        if model == "ggx_aniso":
+            # α_u along the frame's first axis (the tangent), α_v along the bitangent.
+            dist = mi.MicrofacetDistribution(
+                mi.MicrofacetType.GGX, dr.square(inputs["roughness_t"]), dr.square(inputs["roughness_b"])
+            )
+        else:
+            alpha = dr.square(inputs[rough])
+            if alpha_floor is not None:
+                alpha = dr.maximum(alpha, alpha_floor)  # principled's floor, emulated
+            dist = mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha)  # clamps α ≥ 1e-4 itself
         D = dist.eval(h)
         shadowing = (variant or {}).get("shadowing", "separable")
         if shadowing == "separable":
@@ -479,7 +560,7 @@ def reference_noise(model, cases, values, grads, variant=None):
     """Per case, how far the float32 reference moves when its inputs move by a few roundoffs:
     (value noise relative to |f·cos θ_o|, gradient noise relative to the gradient-row norm).
     This measures what float32 can resolve of each reference, internal cancellation included."""
-    names = [n for n, _ in (GGX_PARAMS if model == "ggx" else COATED_PARAMS)]
+    names = [n for n, _ in params_of(model)]
     rnd = random.Random(f"{SEED}-{model}-noise")
     value_noise = [0.0] * len(cases)
     grad_noise = [0.0] * len(cases)
@@ -504,9 +585,11 @@ def reference_noise(model, cases, values, grads, variant=None):
 def reference_cases(model, cases, variant=None):
     """Fill every case with f, f·cos θ_o, gradients, float32 noise and class. A variant has no
     Mitsuba plugin: its values are the composed model's."""
-    names = GGX_PARAMS if model == "ggx" else COATED_PARAMS
+    names = params_of(model)
     comp, per_channel = composed_all(model, cases, variant)
-    if variant:
+    # No Mitsuba plugin for the variants and the anisotropic model: composed values only.
+    composed_only = bool(variant) or model == "ggx_aniso"
+    if composed_only:
         _, comp_cos_o, _ = composed(model, cases, variant=variant)
         plugin = [([comp[k][i] for k in range(3)], comp_cos_o[i]) for i in range(len(cases))]
     else:
@@ -517,7 +600,7 @@ def reference_cases(model, cases, variant=None):
     out = []
     for i, c in enumerate(cases):
         (pv, cos_o) = plugin[i]
-        floor_differs = not variant and principled_alpha_matters(model, c["params"])
+        floor_differs = not composed_only and principled_alpha_matters(model, c["params"])
         cv = [comp[k][i] for k in range(3)]
         # Cross-check: the plugin sum equals the composed model with principled's α floor.
         ref_for_plugin = [comp_floor[k][i] for k in range(3)] if floor_differs else cv
@@ -533,7 +616,7 @@ def reference_cases(model, cases, variant=None):
                     f"(rel {rel:.3g} > {bound:.3g})"
                 )
             report["plugin_vs_composed_max_rel"] = max(report["plugin_vs_composed_max_rel"], rel)
-        value = cv if floor_differs or variant else pv
+        value = cv if floor_differs or composed_only else pv
         f = [v / cos_o if cos_o > 0 else 0.0 for v in value]
         grads_finite = all(
             math.isfinite(per_channel[k][name][j][i]) for k in range(3) for name, ch in names for j in range(ch)
@@ -553,7 +636,7 @@ def reference_cases(model, cases, variant=None):
             {
                 "tag": c["tag"],
                 "class": "strict" if strict else "ill_conditioned",
-                "value_source": "composed" if floor_differs or variant else "plugin",
+                "value_source": "composed" if floor_differs or composed_only else "plugin",
                 "value_noise": q(value_noise[i]) if math.isfinite(value_noise[i]) else 1.0,
                 "grad_noise": q(grad_noise[i]) if math.isfinite(grad_noise[i]) else 1.0,
                 "wi": ql(c["wi"]),
@@ -569,15 +652,15 @@ def reference_cases(model, cases, variant=None):
 
 def brdf_inputs(model):
     rnd = random.Random(f"{SEED}-{model}")
-    make = random_ggx_case if model == "ggx" else random_coated_case
+    make = {"ggx": random_ggx_case, "ggx_aniso": random_aniso_case, "coated": random_coated_case}[model]
     cases = [make(rnd, collocated=(i % 4 == 0)) for i in range(N_RANDOM)]
-    cases += extreme_ggx_cases() if model == "ggx" else extreme_coated_cases()
+    cases += {"ggx": extreme_ggx_cases, "ggx_aniso": extreme_aniso_cases, "coated": extreme_coated_cases}[model]()
     return cases
 
 
 def brdf_golden(model, cases, spec=None, variant=None):
     """`spec` and `variant` name one of GGX_VARIANTS (then `model` is "ggx")."""
-    params = GGX_PARAMS if model == "ggx" else COATED_PARAMS
+    params = params_of(model)
     refs, report = reference_cases(model, cases, variant)
     meta = metadata(
         kind="brdf",
@@ -590,7 +673,7 @@ def brdf_golden(model, cases, spec=None, variant=None):
         params=[{"name": n, "channels": ch} for n, ch in params],
         extra={
             "normal": "normalised inside the model; gradients are w.r.t. the un-normalised vector"
-            if model == "ggx"
+            if model in ("ggx", "ggx_aniso")
             else "fixed +z (wi, wo are in the local frame)",
             "alpha": "max(roughness², 1e-4)",
             "strict_noise": STRICT_NOISE,
@@ -1077,6 +1160,7 @@ def main():
             write(model, brdf_golden(model, brdf_inputs(model)))
         for stem, spec, variant in GGX_VARIANTS:
             write(stem, brdf_golden("ggx", brdf_inputs("ggx"), spec, variant))
+        write("ggx_aniso", brdf_golden("ggx_aniso", brdf_inputs("ggx_aniso")))
         write("height", height_golden(height_inputs()))
         for stem, model, size, highlight in RENDERS:
             write(stem, render_golden(stem, model, size, highlight, render_inputs(stem, model, size)))
@@ -1087,6 +1171,7 @@ def main():
         check_brdf(model, drift)
     for stem, _, variant in GGX_VARIANTS:
         check_brdf("ggx", drift, stem, variant)
+    check_brdf("ggx_aniso", drift)
     check_height(drift)
     for stem, _, _, _ in RENDERS:
         check_render(stem, drift)

@@ -118,6 +118,49 @@ pub fn smith_g1_over_cos(cos_v: &Tensor, alpha: &Tensor) -> Result<Tensor> {
     Ok((smith_denominator(cos_v, alpha)?.recip()? * 2.0)?)
 }
 
+/// Anisotropic GGX D(h) (Heitz 2014, eq. 86; Mitsuba's `MicrofacetDistribution` with α_u, α_v)
+/// from the half vector's components in a shading frame (tangent t, bitangent b, normal n):
+/// `D = 1 / (π α_t α_b (h_t²/α_t² + h_b²/α_b² + h_n²)²)`. All arguments (B,1,H,W).
+pub fn ggx_d_anisotropic(
+    h_t: &Tensor,
+    h_b: &Tensor,
+    h_n: &Tensor,
+    alpha_t: &Tensor,
+    alpha_b: &Tensor,
+) -> Result<Tensor> {
+    // For an orthonormal frame the bracket is ≥ min(1, 1/α_t², 1/α_b²) ≥ ½ whenever both α
+    // ≤ √2 (roughness ≤ 1.19), so the floor never binds on valid input; it only keeps D
+    // finite where the frame is degenerate (a zero normal, whose texel the mask zeroes).
+    let inner = ((h_t.sqr()?.broadcast_div(&alpha_t.sqr()?)?
+        + h_b.sqr()?.broadcast_div(&alpha_b.sqr()?)?)?
+        + h_n.sqr()?)?
+    .maximum(0.5)?;
+    let denom = (alpha_t
+        .broadcast_mul(alpha_b)?
+        .broadcast_mul(&inner.sqr()?)?
+        * std::f64::consts::PI)?;
+    Ok(denom.recip()?)
+}
+
+/// `2 / (c + sqrt(c² + α_t² v_t² + α_b² v_b²))` = anisotropic Smith `G1(v)/cos θ_v` (Heitz
+/// 2014, eq. 86–87) from the direction's components in the shading frame, `c = v_n ≥ 0`.
+pub fn smith_g1_over_cos_anisotropic(
+    v_t: &Tensor,
+    v_b: &Tensor,
+    cos_v: &Tensor,
+    alpha_t: &Tensor,
+    alpha_b: &Tensor,
+) -> Result<Tensor> {
+    // In an orthonormal frame `v_t² + v_b² = 1 − c²`, so the argument is ≥ c² + min(α)²(1 − c²)
+    // ≥ min(α)² ≥ ALPHA_MIN²: the floor never binds there and only keeps the root and its
+    // slope finite in a degenerate frame (a zero normal, which the mask zeroes).
+    let root = ((cos_v.sqr()? + v_t.broadcast_mul(alpha_t)?.sqr()?)?
+        + v_b.broadcast_mul(alpha_b)?.sqr()?)?
+    .maximum(ALPHA_MIN * ALPHA_MIN)?
+    .sqrt()?;
+    Ok(((cos_v + root)?.recip()? * 2.0)?)
+}
+
 /// The Fresnel term of a GGX lobe: the `ggx` model's `fresnel` argument.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum FresnelTerm {
