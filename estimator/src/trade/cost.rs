@@ -1,11 +1,13 @@
 //! What a BRDF model costs, measured: its flash render (evaluation) and render + gradient time
 //! per megatexel, and the bytes of its exported maps. The trade study's cost axis.
 //!
-//! Times are the minimum over [`REPEATS`] runs after one warm-up (the run least disturbed by
-//! other processes on a shared machine), on random valid maps
+//! Times are the minimum over [`REPEATS`] rounds after one warm-up round (the run least
+//! disturbed by other processes on a shared machine), on random valid maps
 //! ([`photomat_core::testing::random_maps`]) of [`BENCH_SIDE`]² texels under the centred flash,
-//! in f32 on the CPU. They are measurements of this machine at this moment: compare models
-//! measured in the same run, not numbers from different runs.
+//! in f32 on the CPU. [`render_costs`] times several models in interleaved rounds (each round
+//! renders every model once), so that a load that comes and goes slows them all alike and
+//! their order holds. They are measurements of this machine at this moment: compare models
+//! measured in the same call, not numbers from different runs.
 
 use std::path::Path;
 use std::time::Instant;
@@ -18,7 +20,7 @@ use serde::{Deserialize, Serialize};
 /// Side of the maps the render is timed on: 256² = 65 536 texels, large enough that fixed
 /// per-call costs are a small share, small enough for a second per model.
 pub const BENCH_SIDE: usize = 256;
-/// Timed runs per measurement (the fastest is kept).
+/// Timed rounds per measurement (the fastest is kept).
 pub const REPEATS: usize = 7;
 
 /// Render cost of one model.
@@ -30,33 +32,55 @@ pub struct RenderCost {
     pub eval_grad_ms_per_megatexel: f64,
 }
 
-/// Times `brdf`'s flash render and render + backward ([`RenderCost`]).
-pub fn render_cost(brdf: &Brdf, seed: u64) -> anyhow::Result<RenderCost> {
+/// Times the flash render and render + backward ([`RenderCost`]) of every model in
+/// `brdfs`, in interleaved rounds; one cost per model, in order.
+pub fn render_costs(brdfs: &[Brdf], seed: u64) -> anyhow::Result<Vec<RenderCost>> {
     let device = Device::Cpu;
-    let mut rng = photomat_core::testing::rng(seed);
-    // Roughness ≥ 0.05: the timed values stay in the models' well-conditioned range.
-    let maps = photomat_core::testing::random_maps(brdf, &mut rng, BENCH_SIDE, 0.05, DType::F32)?;
     let geometry =
         LightSet::single(Highlight { x: 0.0, y: 0.0 }).geometry(BENCH_SIDE, DType::F32, &device)?;
-    let megatexels = (BENCH_SIDE * BENCH_SIDE) as f64 / 1e6;
-    let eval = fastest_seconds(|| {
-        render_with(brdf.as_ref(), &maps, &geometry)?;
-        Ok(())
-    })?;
-    let (vars, var_maps) = as_vars(&maps)?;
-    let eval_grad = fastest_seconds(|| {
-        let image = render_with(brdf.as_ref(), &var_maps, &geometry)?;
+    let mut inputs = Vec::new();
+    for brdf in brdfs {
+        let mut rng = photomat_core::testing::rng(seed);
+        // Roughness ≥ 0.05: the timed values stay in the models' well-conditioned range.
+        let maps =
+            photomat_core::testing::random_maps(brdf, &mut rng, BENCH_SIDE, 0.05, DType::F32)?;
+        let (vars, var_maps) = as_vars(&maps)?;
+        inputs.push((maps, vars, var_maps));
+    }
+    let eval = |k: usize| -> anyhow::Result<f64> {
+        let start = Instant::now();
+        render_with(brdfs[k].as_ref(), &inputs[k].0, &geometry)?;
+        Ok(start.elapsed().as_secs_f64())
+    };
+    let eval_grad = |k: usize| -> anyhow::Result<f64> {
+        let (_, vars, var_maps) = &inputs[k];
+        let start = Instant::now();
+        let image = render_with(brdfs[k].as_ref(), var_maps, &geometry)?;
         let grads = image.sum_all()?.backward()?;
         // Touch every gradient so that none is optimised away.
-        for var in &vars {
+        for var in vars {
             grads.get(var.as_tensor());
         }
-        Ok(())
-    })?;
-    Ok(RenderCost {
-        eval_ms_per_megatexel: eval * 1e3 / megatexels,
-        eval_grad_ms_per_megatexel: eval_grad * 1e3 / megatexels,
-    })
+        Ok(start.elapsed().as_secs_f64())
+    };
+    let mut fastest = vec![(f64::INFINITY, f64::INFINITY); brdfs.len()];
+    // Round 0 is the untimed warm-up.
+    for round in 0..=REPEATS {
+        for (k, best) in fastest.iter_mut().enumerate() {
+            let (e, g) = (eval(k)?, eval_grad(k)?);
+            if round > 0 {
+                *best = (best.0.min(e), best.1.min(g));
+            }
+        }
+    }
+    let megatexels = (BENCH_SIDE * BENCH_SIDE) as f64 / 1e6;
+    Ok(fastest
+        .into_iter()
+        .map(|(e, g)| RenderCost {
+            eval_ms_per_megatexel: e * 1e3 / megatexels,
+            eval_grad_ms_per_megatexel: g * 1e3 / megatexels,
+        })
+        .collect())
 }
 
 /// Every map as a [`Var`], and the maps that read them.
@@ -69,18 +93,6 @@ fn as_vars(maps: &MaterialMaps) -> anyhow::Result<(Vec<Var>, MaterialMaps)> {
         vars.push(var);
     }
     Ok((vars, out))
-}
-
-/// The fastest wall seconds of [`REPEATS`] calls of `f`, after one untimed warm-up call.
-fn fastest_seconds(mut f: impl FnMut() -> anyhow::Result<()>) -> anyhow::Result<f64> {
-    f()?;
-    let mut fastest = f64::INFINITY;
-    for _ in 0..REPEATS {
-        let start = Instant::now();
-        f()?;
-        fastest = fastest.min(start.elapsed().as_secs_f64());
-    }
-    Ok(fastest)
 }
 
 /// Bytes of one material's exported maps.
@@ -138,8 +150,14 @@ mod tests {
 
     #[test]
     fn render_cost_is_measured_for_every_builtin() {
-        for spec in photomat_brdfs::builtin_configurations().unwrap() {
-            let cost = render_cost(&photomat_core::lookup(&spec).unwrap(), 1).unwrap();
+        let specs = photomat_brdfs::builtin_configurations().unwrap();
+        let brdfs: Vec<Brdf> = specs
+            .iter()
+            .map(|s| photomat_core::lookup(s).unwrap())
+            .collect();
+        let costs = render_costs(&brdfs, 1).unwrap();
+        assert_eq!(costs.len(), specs.len());
+        for (spec, cost) in specs.iter().zip(&costs) {
             assert!(
                 cost.eval_ms_per_megatexel.is_finite() && cost.eval_ms_per_megatexel > 0.0,
                 "{spec}: {cost:?}"

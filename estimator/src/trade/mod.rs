@@ -7,7 +7,8 @@
 //!   images and SSIM ([`ssim`], Wang et al. 2004), per light and over all lights. The lights are
 //!   the reference's five ([`LightSet::reference`]) and [`HELD_OUT_LIGHTS`] more drawn from a
 //!   fixed seed (positions no estimator was tuned on).
-//! - **Cost**: render and render + gradient time per megatexel ([`cost::render_cost`]), E's
+//! - **Cost**: render and render + gradient time per megatexel ([`cost::render_costs`], all
+//!   models timed together in interleaved rounds), E's
 //!   parameters and mean training step time, and the bytes of one material's exported maps.
 //!
 //! Estimators are cached in `settings.cache` (one run folder per specification, named after it):
@@ -188,7 +189,7 @@ impl TradeStudy {
             .with_context(|| format!("cannot load the GAN model in '{}'", s.gan.display()))?;
         let evaluation = Evaluation::new(&gan, s)?;
 
-        let mut entries = Vec::new();
+        let mut trained = Vec::new();
         for (index, spec) in canonical.iter().enumerate() {
             let dir = s.cache.join(folder_name(spec));
             let reused = self.prepare_cache(&dir, spec, progress)?;
@@ -203,13 +204,15 @@ impl TradeStudy {
             }
             let estimator = EstimatorModel::load(&dir, &device)
                 .with_context(|| format!("cannot load the estimator in '{}'", dir.display()))?;
-            entries.push(evaluation.entry(
-                &estimator,
-                &dir,
-                &out.join("maps").join(folder_name(spec)),
-                reused,
-                s.seed,
-            )?);
+            trained.push((estimator, dir, reused));
+        }
+        // All models timed together, in interleaved rounds (`cost::render_costs`).
+        let brdfs: Vec<_> = trained.iter().map(|(e, _, _)| e.brdf().clone()).collect();
+        let render = cost::render_costs(&brdfs, s.seed)?;
+        let mut entries = Vec::new();
+        for ((estimator, dir, reused), render) in trained.iter().zip(render) {
+            let maps_dir = out.join("maps").join(folder_name(&estimator.brdf().name()));
+            entries.push(evaluation.entry(estimator, dir, &maps_dir, *reused, render)?);
         }
         let report = TradeReport::new(s.clone(), evaluation.lights_described(), entries);
         let mut json = serde_json::to_string_pretty(&report)?;
@@ -416,15 +419,15 @@ impl Evaluation {
             .collect()
     }
 
-    /// Scores `estimator` on every material and light, times its model, and writes the first
-    /// material's maps to `maps_dir`.
+    /// Scores `estimator` on every material and light, with its model's measured `render`
+    /// cost, and writes the first material's maps to `maps_dir`.
     fn entry(
         &self,
         estimator: &EstimatorModel,
         run: &Path,
         maps_dir: &Path,
         reused: bool,
-        seed: u64,
+        render: cost::RenderCost,
     ) -> anyhow::Result<TradeEntry> {
         let brdf = estimator.brdf();
         let lights = self.lights.len();
@@ -455,7 +458,6 @@ impl Evaluation {
         let n = self.features.len() as f64;
         let l1_per_light: Vec<f64> = l1_sum.iter().map(|v| v / n).collect();
         let ssim_per_light: Vec<f64> = ssim_sum.iter().map(|v| v / n).collect();
-        let render = cost::render_cost(brdf, seed)?;
         Ok(TradeEntry {
             spec: brdf.name(),
             channels: brdf.channels(),
