@@ -14,6 +14,10 @@ use super::report::{TradeReport, cost_of};
 
 /// Size of the plot in pixels.
 pub const PLOT_SIZE: (u32, u32) = (960, 640);
+/// Vertical offsets tried for a point's label, in pixels from the point (above, below, …).
+const LABEL_OFFSETS: [i32; 6] = [-22, 8, -44, 30, -66, 52];
+/// Height of a label's box, in pixels.
+const LABEL_HEIGHT: i32 = 18;
 /// The font family name the plot's text asks for.
 const FONT: &str = "sans-serif";
 
@@ -54,11 +58,16 @@ fn draw(buffer: &mut [u8], report: &TradeReport) -> Result<(), Box<dyn std::erro
         .iter()
         .map(|e| (cost_of(e), e.accuracy.l1_mean, e.spec.as_str(), e.pareto))
         .collect();
-    let (x_max, y_max) = points
+    let (x_min, x_max, y_max) = points
         .iter()
-        .fold((0.0f64, 0.0f64), |(x, y), p| (x.max(p.0), y.max(p.1)));
-    // 25 % headroom on both axes for the labels; a floor so that one point still has a range.
-    let x_top = (x_max * 1.25).max(1e-3);
+        .fold((f64::INFINITY, 0.0f64, 0.0f64), |(lo, hi, y), p| {
+            (lo.min(p.0), hi.max(p.0), y.max(p.1))
+        });
+    // The costs' own range with room for the labels (models' costs are often within a few
+    // tens of percent of each other, which an axis from 0 would squeeze together); the floors
+    // keep a range when there is one point.
+    let x_bottom = (x_min * 0.9).max(0.0);
+    let x_top = (x_max * 1.3).max(x_bottom + 1e-3);
     let y_top = (y_max * 1.25).max(1e-4);
     let mut chart = ChartBuilder::on(&root)
         .caption(
@@ -68,7 +77,7 @@ fn draw(buffer: &mut [u8], report: &TradeReport) -> Result<(), Box<dyn std::erro
         .margin(20)
         .x_label_area_size(50)
         .y_label_area_size(70)
-        .build_cartesian_2d(0.0..x_top, 0.0..y_top)?;
+        .build_cartesian_2d(x_bottom..x_top, 0.0..y_top)?;
     chart
         .configure_mesh()
         .x_desc("flash render, ms per megatexel (this machine)")
@@ -78,14 +87,30 @@ fn draw(buffer: &mut [u8], report: &TradeReport) -> Result<(), Box<dyn std::erro
         .draw()?;
     let front: Vec<(f64, f64)> = points.iter().filter(|p| p.3).map(|p| (p.0, p.1)).collect();
     chart.draw_series(LineSeries::new(front, BLUE.stroke_width(2)))?;
+    // Labels right of their points, each at the first vertical offset whose box overlaps no
+    // label placed before it (close costs and errors would otherwise print over each other).
+    let mut placed: Vec<(i32, i32, i32, i32)> = Vec::new();
     for &(x, y, label, pareto) in &points {
         let color = if pareto { BLUE } else { RED };
-        // The point, and its label 10 pixels right of and above it.
+        let (px, py) = chart.backend_coord(&(x, y));
+        // DejaVu Sans at 16 px: about 9 px per character, 18 px per line.
+        let width = 9 * label.chars().count() as i32;
+        let dy = LABEL_OFFSETS
+            .iter()
+            .copied()
+            .find(|&dy| {
+                let (left, top) = (px + 10, py + dy);
+                !placed.iter().any(|&(l, t, r, b)| {
+                    left < r && l < left + width && top < b && t < top + LABEL_HEIGHT
+                })
+            })
+            .unwrap_or(LABEL_OFFSETS[0]);
+        placed.push((px + 10, py + dy, px + 10 + width, py + dy + LABEL_HEIGHT));
         let marker = EmptyElement::at((x, y))
             + Circle::new((0, 0), 6, color.filled())
             + Text::new(
                 label.to_string(),
-                (10, -20),
+                (10, dy),
                 (FONT, 16).into_font().color(&BLACK),
             );
         chart.draw_series(std::iter::once(marker))?;
