@@ -3,7 +3,8 @@
 //! that records its texel size and a `height(ggx)` estimator), and `photomat sample` without
 //! `--model` writes 512² materials whose maps load back with that texel size, are exactly
 //! periodic, and whose analytic renders follow the neural relighting M much more closely than
-//! the untrained estimator's do.
+//! the untrained estimator's do; it also holds `lambert` and `coated` estimators, so that
+//! `photomat sample --brdf auto` chooses a model per material.
 
 use std::path::{Path, PathBuf};
 
@@ -26,13 +27,25 @@ const MAX_BUNDLED_BYTES: u64 = 8 << 20;
 /// broken or untrained model fails.
 const MAX_L1: f64 = 0.08;
 
+/// Bytes of the files under `dir`, sub-folders included.
+fn folder_bytes(dir: &Path) -> u64 {
+    std::fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
+        .map(|entry| {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                folder_bytes(&path)
+            } else {
+                path.metadata().unwrap().len()
+            }
+        })
+        .sum()
+}
+
 #[test]
 fn bundled_model_is_small_and_loads() {
     let dir = bundled();
-    let total: u64 = std::fs::read_dir(&dir)
-        .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
-        .map(|entry| entry.unwrap().metadata().unwrap().len())
-        .sum();
+    let total = folder_bytes(&dir);
     assert!(total < MAX_BUNDLED_BYTES, "models/demo holds {total} bytes");
 
     let gan = GanModel::load(&dir, &Device::Cpu).unwrap();
@@ -108,5 +121,36 @@ fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
                 folder.display()
             );
         }
+    }
+}
+
+#[test]
+fn the_bundled_model_chooses_a_brdf_per_material() {
+    let sampler = photomat_estimator::sample::Sampler::open(&bundled(), &Device::Cpu).unwrap();
+    let mut names = sampler.brdf_names();
+    names.sort();
+    assert_eq!(names, ["coated", "height(ggx, scale=0.02)", "lambert"]);
+
+    let out = tempfile::tempdir().unwrap();
+    let out_s = out.path().to_str().unwrap();
+    let mut log = Vec::new();
+    photomat_cli::run_with_output(
+        [
+            "photomat", "sample", "--count", "2", "--size", "128", "--brdf", "auto", "--out", out_s,
+        ],
+        &mut log,
+    )
+    .unwrap();
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.path().join("summary.json")).unwrap()).unwrap();
+    for m in summary["materials"].as_array().unwrap() {
+        let manifest: serde_json::Value = serde_json::from_slice(
+            &std::fs::read(Path::new(m["folder"].as_str().unwrap()).join("material/material.json"))
+                .unwrap(),
+        )
+        .unwrap();
+        let selection = &manifest["selection"];
+        assert_eq!(selection["candidates"].as_array().unwrap().len(), 3);
+        assert_eq!(selection["chosen"], manifest["brdf"]);
     }
 }
