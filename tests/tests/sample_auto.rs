@@ -1,7 +1,7 @@
 //! `photomat sample --brdf auto|SPEC` on a tiny model folder holding three estimators (the
 //! root's `height(ggx)`, `estimators/lambert/`, `estimators/coated/`): auto records per
-//! material the candidates' errors and picks the cheapest within the tolerance (the best at
-//! tolerance 0, the cheapest at a huge one), the summary counts the choices, a named model
+//! material the candidates' errors and picks the cheapest within the tolerance of the best
+//! linear-radiance L1 (the best at tolerance 0, the cheapest at a huge one), the summary counts the choices, a named model
 //! is used for every material, and an absent one is refused naming those present.
 
 use std::path::Path;
@@ -89,15 +89,13 @@ fn sample_auto_records_and_applies_the_choice() {
             .collect();
         // Cheapest first: lambert (6 channels), height(ggx) (8), coated (11).
         assert_eq!(names, ["lambert", "height(ggx, scale=0.02)", "coated"]);
+        // Auto compares the L1 of linear radiance.
+        let error = |c: &Value| c["l1_linear"].as_f64().unwrap();
         let best = candidates
             .iter()
-            .min_by(|a, b| {
-                a["l1"]
-                    .as_f64()
-                    .unwrap()
-                    .total_cmp(&b["l1"].as_f64().unwrap())
-            })
+            .min_by(|a, b| error(a).total_cmp(&error(b)))
             .unwrap();
+        assert!(candidates.iter().all(|c| c["l1"].as_f64().unwrap() > 0.0));
         assert_eq!(selection["chosen"], best["brdf"]);
         assert_eq!(manifest["brdf"], best["brdf"]);
         assert_eq!(m["brdf"], best["brdf"]);

@@ -98,8 +98,9 @@ pub struct Args {
 
     /// BRDF model of the maps: one the model folder has an estimator for (its root one by
     /// default, others under estimators/<name>/), or `auto`: per material, the cheapest model
-    /// (fewest map channels) whose L1 against M's relighting is within --tolerance of the best
-    /// one's. material.json records the choice and every candidate's error.
+    /// (fewest map channels) whose L1 of linear radiance against M's relighting is within
+    /// --tolerance of the best one's. material.json records the choice and every candidate's
+    /// error.
     #[arg(long, value_name = "SPEC|auto")]
     pub brdf: Option<String>,
 

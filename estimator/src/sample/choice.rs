@@ -4,9 +4,11 @@
 //! `estimator.safetensors`) and may hold more under `estimators/<name>/`, one per BRDF model,
 //! all reading the same GAN's features. [`BrdfChoice`] says which to use: the default, one by
 //! name, or **auto**: per material, every estimator decodes the material, each analytic render
-//! is compared with M's relighting (L1 under the reference lights), and the material gets the
-//! cheapest model whose error is within `tolerance` of the best one's
-//! (`L1 ≤ (1 + tolerance) · L1_best`). "Cheapest" orders models by their map channels n (what
+//! is compared with M's relighting under the run's lights, and the material gets the cheapest
+//! model whose error is within `tolerance` of the best one's (`E ≤ (1 + tolerance) · E_best`).
+//! The error E is the L1 of *linear* radiance (the display images raised to 2.2): the display
+//! encoding compresses a highlight's core, so an image-wide L1 of display values let a model
+//! without any highlight (`lambert`) pass on materials whose highlight is small and dim. "Cheapest" orders models by their map channels n (what
 //! a renderer stores, reads and evaluates per texel; `lambert` 6 < `height(ggx)` 8 < `ggx` 10
 //! < `coated` 11), ties by name: a fixed order, so a seed still names the same files on every
 //! run, where a timed order could change with the machine's load.
@@ -60,8 +62,11 @@ pub struct Candidate {
     pub brdf: String,
     /// Map channels n: the cost order.
     pub channels: usize,
-    /// L1 of its analytic render against M's relighting, mean over the run's lights.
+    /// L1 of its analytic render against M's relighting, display-encoded, mean over the run's
+    /// lights (the figure `summary.json` reports).
     pub l1: f64,
+    /// The same on linear radiance (display values raised to 2.2): the error auto compares.
+    pub l1_linear: f64,
 }
 
 /// How a material's model was chosen: written into its `material.json` as `selection`.
@@ -75,17 +80,17 @@ pub struct Selection {
     pub candidates: Vec<Candidate>,
 }
 
-/// The index of the cheapest candidate within `tolerance` of the best L1; `candidates` must
-/// be sorted cheapest first and non-empty. A non-finite L1 never qualifies.
+/// The index of the cheapest candidate within `tolerance` of the best linear-radiance L1;
+/// `candidates` must be sorted cheapest first. A non-finite error never qualifies.
 pub fn choose(candidates: &[Candidate], tolerance: f64) -> Option<usize> {
     let best = candidates
         .iter()
-        .map(|c| c.l1)
-        .filter(|l1| l1.is_finite())
+        .map(|c| c.l1_linear)
+        .filter(|e| e.is_finite())
         .fold(f64::INFINITY, f64::min);
     candidates
         .iter()
-        .position(|c| c.l1.is_finite() && c.l1 <= best * (1.0 + tolerance))
+        .position(|c| c.l1_linear.is_finite() && c.l1_linear <= best * (1.0 + tolerance))
 }
 
 /// Every estimator of the model folder `dir`: the root one first, then those of
@@ -138,11 +143,12 @@ pub fn load_estimators(
 mod tests {
     use super::*;
 
-    fn candidate(brdf: &str, channels: usize, l1: f64) -> Candidate {
+    fn candidate(brdf: &str, channels: usize, l1_linear: f64) -> Candidate {
         Candidate {
             brdf: brdf.into(),
             channels,
-            l1,
+            l1: 0.0,
+            l1_linear,
         }
     }
 

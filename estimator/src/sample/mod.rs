@@ -427,24 +427,27 @@ impl Job<'_> {
                 .with_texel_size(gan.config().map_texel_size());
             timings.estimate += stage.elapsed().as_secs_f64();
             let analytic = self.analytic(estimator.brdf(), &maps, timings)?;
-            let l1: Vec<f64> = (analytic.clone() - &neural)?
-                .abs()?
-                .flatten_from(1)?
-                .mean(1)?
-                .to_dtype(DType::F64)?
-                .to_vec1()?;
-            scored.push((estimator, maps, analytic, l1));
+            let l1 = per_light_l1(&analytic, &neural)?;
+            let l1_linear = match self.tolerance {
+                // Auto compares linear radiance (`choice` module docs).
+                Some(_) => mean(&per_light_l1(
+                    &analytic.powf(photomat_core::render::DISPLAY_GAMMA)?,
+                    &neural.powf(photomat_core::render::DISPLAY_GAMMA)?,
+                )?),
+                None => f64::NAN,
+            };
+            scored.push((estimator, maps, analytic, l1, l1_linear));
         }
-        let mean = |l1: &[f64]| l1.iter().sum::<f64>() / l1.len() as f64;
         let (chosen, selection) = match self.tolerance {
             None => (0, None),
             Some(tolerance) => {
                 let candidates: Vec<Candidate> = scored
                     .iter()
-                    .map(|(e, _, _, l1)| Candidate {
+                    .map(|(e, _, _, l1, l1_linear)| Candidate {
                         brdf: e.brdf().name(),
                         channels: e.brdf().channels(),
                         l1: mean(l1),
+                        l1_linear: *l1_linear,
                     })
                     .collect();
                 let k = choice::choose(&candidates, tolerance).with_context(|| {
@@ -458,7 +461,7 @@ impl Job<'_> {
                 (k, Some(selection))
             }
         };
-        let (estimator, maps, analytic, l1) = scored.swap_remove(chosen);
+        let (estimator, maps, analytic, l1, _) = scored.swap_remove(chosen);
         let brdf = estimator.brdf();
         let inner = brdf.innermost();
 
@@ -637,6 +640,21 @@ fn aligned_rows(rows: Vec<SheetRow>) -> Vec<Vec<PlanarImage>> {
             row.tiles
         })
         .collect()
+}
+
+/// Mean absolute difference per light of two (lights, 3, R, R) batches.
+fn per_light_l1(a: &Tensor, b: &Tensor) -> anyhow::Result<Vec<f64>> {
+    Ok((a - b)?
+        .abs()?
+        .flatten_from(1)?
+        .mean(1)?
+        .to_dtype(DType::F64)?
+        .to_vec1()?)
+}
+
+/// The mean of a non-empty list.
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
 }
 
 /// Greatest common divisor (Euclid).
