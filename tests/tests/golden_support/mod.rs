@@ -254,6 +254,15 @@ pub struct Report {
 }
 
 impl Report {
+    /// How many failures are of a value (f·cos θ_o) rather than a gradient: what a model with
+    /// a wrong formula must produce on most cases.
+    pub fn value_failures(&self) -> usize {
+        self.failures
+            .iter()
+            .filter(|f| f.contains("f·cos θ_o"))
+            .count()
+    }
+
     pub fn record(&mut self, kind: &str, err: f64, case: usize, tag: &str) {
         self.checked += 1;
         let w = self.worst.entry(kind.to_string()).or_insert_with(|| Worst {
