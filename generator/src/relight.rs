@@ -47,6 +47,15 @@ const ACTIVATION: photomat_kernels::MlpActivation = photomat_kernels::MlpActivat
     gain: LRELU_GAIN,
 };
 
+/// M's encoded output (`2·display − 1`, unbounded) as display values in [0, 1], clamped: how
+/// every picture and image metric reads a relighting.
+///
+/// # Shapes
+/// any → the same.
+pub fn to_display(encoded: &Tensor) -> Result<Tensor> {
+    encoded.affine(0.5, 0.5)?.clamp(0f32, 1f32)
+}
+
 /// The relighting MLP M.
 #[derive(Debug, Clone)]
 pub struct Relight {

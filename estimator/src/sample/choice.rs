@@ -8,10 +8,11 @@
 //! model whose error is within `tolerance` of the best one's (`E ≤ (1 + tolerance) · E_best`).
 //! The error E is the L1 of *linear* radiance (the display images raised to 2.2): the display
 //! encoding compresses a highlight's core, so an image-wide L1 of display values let a model
-//! without any highlight (`lambert`) pass on materials whose highlight is small and dim. "Cheapest" orders models by their map channels n (what
-//! a renderer stores, reads and evaluates per texel; `lambert` 6 < `height(ggx)` 8 < `ggx` 10
-//! < `coated` 11), ties by name: a fixed order, so a seed still names the same files on every
-//! run, where a timed order could change with the machine's load.
+//! without any highlight (`lambert`) pass on materials whose highlight is small and dim.
+//! "Cheapest" orders models by their map channels n (what a renderer stores, reads and
+//! evaluates per texel; `lambert` 6 < `height(ggx)` 8 < `ggx` 10 < `coated` 11), ties by name
+//! ([`cost_key`]): a fixed order, so a seed still names the same files on every run, where a
+//! timed order could change with the machine's load.
 
 use std::path::Path;
 
@@ -37,7 +38,8 @@ pub enum BrdfChoice {
     Default,
     /// The estimator of this specification (canonical names are compared).
     Named(String),
-    /// Per material, the cheapest model within `tolerance` (relative) of the best L1.
+    /// Per material, the cheapest model within `tolerance` (relative) of the best
+    /// linear-radiance L1.
     Auto { tolerance: f64 },
 }
 
@@ -74,7 +76,7 @@ pub struct Candidate {
 pub struct Selection {
     /// The chosen specification.
     pub chosen: String,
-    /// Relative tolerance over the best L1.
+    /// Relative tolerance over the best linear-radiance L1.
     pub tolerance: f64,
     /// Every candidate, cheapest first.
     pub candidates: Vec<Candidate>,
@@ -93,8 +95,13 @@ pub fn choose(candidates: &[Candidate], tolerance: f64) -> Option<usize> {
         .position(|c| c.l1_linear.is_finite() && c.l1_linear <= best * (1.0 + tolerance))
 }
 
+/// The cost order of estimators: fewer map channels first, then the model's name.
+pub fn cost_key(estimator: &EstimatorModel) -> (usize, String) {
+    (estimator.brdf().channels(), estimator.brdf().name())
+}
+
 /// Every estimator of the model folder `dir`: the root one first, then those of
-/// `estimators/*/` sorted cheapest first (channels, then name). Each must read
+/// `estimators/*/` sorted cheapest first ([`cost_key`]). Each must read
 /// `feature_channels` features, and no two may decode into the same model.
 pub fn load_estimators(
     dir: &Path,
@@ -133,9 +140,7 @@ pub fn load_estimators(
         }
         estimators.push(estimator);
     }
-    estimators[1..].sort_by(|a, b| {
-        (a.brdf().channels(), a.brdf().name()).cmp(&(b.brdf().channels(), b.brdf().name()))
-    });
+    estimators[1..].sort_by_cached_key(cost_key);
     Ok(estimators)
 }
 

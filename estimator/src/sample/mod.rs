@@ -223,10 +223,7 @@ impl Sampler {
             }
             BrdfChoice::Auto { .. } => {
                 let mut all: Vec<&EstimatorModel> = self.estimators.iter().collect();
-                all.sort_by(|a, b| {
-                    (a.brdf().channels(), a.brdf().name())
-                        .cmp(&(b.brdf().channels(), b.brdf().name()))
-                });
+                all.sort_by_cached_key(|e| choice::cost_key(e));
                 Ok(all)
             }
         }
@@ -417,7 +414,9 @@ impl Job<'_> {
         let stage = Instant::now();
         let features = gan.features_for_seeds_at(&[seed], options.psi, self.size)?;
         timings.generate += stage.elapsed().as_secs_f64();
-        let neural = self.neural(&features, timings)?;
+        let stage = Instant::now();
+        let neural = neural_renders(gan, &features, self.geometry)?;
+        timings.relight += stage.elapsed().as_secs_f64();
         // Every candidate decodes and renders the material; one is kept.
         let mut scored = Vec::new();
         for estimator in self.candidates {
@@ -426,7 +425,9 @@ impl Job<'_> {
                 .estimate(&features)?
                 .with_texel_size(gan.config().map_texel_size());
             timings.estimate += stage.elapsed().as_secs_f64();
-            let analytic = self.analytic(estimator.brdf(), &maps, timings)?;
+            let stage = Instant::now();
+            let analytic = analytic_renders(estimator.brdf(), &maps, self.geometry)?;
+            timings.render += stage.elapsed().as_secs_f64();
             let l1 = per_light_l1(&analytic, &neural)?;
             let l1_linear = match self.tolerance {
                 // Auto compares linear radiance (`choice` module docs).
@@ -555,67 +556,65 @@ impl Job<'_> {
                 folder: folder.display().to_string(),
                 brdf: brdf.name(),
                 selection,
-                l1_mean: l1.iter().sum::<f64>() / l1.len() as f64,
+                l1_mean: mean(&l1),
                 l1_per_light: l1,
             },
             sheet_row,
         })
     }
+}
 
-    /// Texels relit or rendered per call: all lights at up to 512² (≈ 1.3 M texels, a few
-    /// hundred MB of intermediates), fewer lights at a time above (5 lights of a 1024²
-    /// material would hold gigabytes at once).
-    fn lights_per_call(&self) -> anyhow::Result<usize> {
-        let lights = self.geometry.omega.dim(0)?;
-        Ok((LIGHT_BATCH_TEXELS / (self.size * self.size)).clamp(1, lights))
-    }
+/// Lights per call of M or the renderer at a side of `side` texels: all of them up to
+/// [`LIGHT_BATCH_TEXELS`] texels, fewer above (M's and the renderer's intermediates scale with
+/// the batch: 5 lights of a 1024² material would hold gigabytes at once).
+fn lights_per_call(geometry: &FlashGeometry, side: usize) -> anyhow::Result<usize> {
+    let lights = geometry.omega.dim(0)?;
+    Ok((LIGHT_BATCH_TEXELS / (side * side)).clamp(1, lights))
+}
 
-    /// M's relighting of `features` under every light, display-encoded in [0, 1].
-    ///
-    /// # Shapes
-    /// features (1, F, R, R) → (lights, 3, R, R).
-    fn neural(&self, features: &Tensor, timings: &mut Timings) -> anyhow::Result<Tensor> {
-        let lights = self.geometry.omega.dim(0)?;
-        let per_call = self.lights_per_call()?;
-        let mut neural = Vec::new();
-        let relight = Instant::now();
-        for first in (0..lights).step_by(per_call) {
-            let n = per_call.min(lights - first);
-            let group = self.geometry.narrow(first, n)?;
-            let repeated = features.repeat((n, 1, 1, 1))?;
-            neural.push(
-                self.sampler
-                    .gan
-                    .relight()
-                    .forward(&repeated, &group.omega)?,
-            );
-        }
-        timings.relight += relight.elapsed().as_secs_f64();
-        Ok(Tensor::cat(&neural, 0)?.affine(0.5, 0.5)?.clamp(0.0, 1.0)?)
+/// M's relighting of `features` under every light of `geometry`, display-encoded in [0, 1]
+/// ([`photomat_generator::relight::to_display`]), in groups of lights that bound the memory.
+///
+/// # Shapes
+/// features (1, F, R, R) → (lights, 3, R, R).
+pub(crate) fn neural_renders(
+    gan: &GanModel,
+    features: &Tensor,
+    geometry: &FlashGeometry,
+) -> anyhow::Result<Tensor> {
+    let lights = geometry.omega.dim(0)?;
+    let per_call = lights_per_call(geometry, features.dim(3)?)?;
+    let mut neural = Vec::new();
+    for first in (0..lights).step_by(per_call) {
+        let n = per_call.min(lights - first);
+        let group = geometry.narrow(first, n)?;
+        let repeated = features.repeat((n, 1, 1, 1))?;
+        neural.push(gan.relight().forward(&repeated, &group.omega)?);
     }
+    Ok(photomat_generator::relight::to_display(&Tensor::cat(
+        &neural, 0,
+    )?)?)
+}
 
-    /// The analytic render of `maps` in `brdf` under every light, display-encoded in [0, 1],
-    /// from the one geometry of the run.
-    ///
-    /// # Shapes
-    /// maps (1, C, R, R) → (lights, 3, R, R).
-    fn analytic(
-        &self,
-        brdf: &Brdf,
-        maps: &MaterialMaps,
-        timings: &mut Timings,
-    ) -> anyhow::Result<Tensor> {
-        let lights = self.geometry.omega.dim(0)?;
-        let per_call = self.lights_per_call()?;
-        let mut analytic = Vec::new();
-        let shade = Instant::now();
-        for first in (0..lights).step_by(per_call) {
-            let group = self.geometry.narrow(first, per_call.min(lights - first))?;
-            analytic.push(render_with(brdf.as_ref(), maps, &group)?);
-        }
-        timings.render += shade.elapsed().as_secs_f64();
-        Ok(Tensor::cat(&analytic, 0)?)
+/// The analytic render of `maps` in `brdf` under every light of `geometry`, display-encoded in
+/// [0, 1], in the same groups of lights as [`neural_renders`].
+///
+/// # Shapes
+/// maps (1, C, R, R) → (lights, 3, R, R).
+pub(crate) fn analytic_renders(
+    brdf: &Brdf,
+    maps: &MaterialMaps,
+    geometry: &FlashGeometry,
+) -> anyhow::Result<Tensor> {
+    let lights = geometry.omega.dim(0)?;
+    let (_, side, _) = maps.batch_and_size()?;
+    let per_call = lights_per_call(geometry, side)?;
+    let mut analytic = Vec::new();
+    for first in (0..lights).step_by(per_call) {
+        let group = geometry.narrow(first, per_call.min(lights - first))?;
+        analytic.push(render_with(brdf.as_ref(), maps, &group)?);
     }
+    Ok(Tensor::cat(&analytic, 0)?)
 }
 
 /// One material's contact-sheet row: its map previews, then its renders.
@@ -643,7 +642,7 @@ fn aligned_rows(rows: Vec<SheetRow>) -> Vec<Vec<PlanarImage>> {
 }
 
 /// Mean absolute difference per light of two (lights, 3, R, R) batches.
-fn per_light_l1(a: &Tensor, b: &Tensor) -> anyhow::Result<Vec<f64>> {
+pub(crate) fn per_light_l1(a: &Tensor, b: &Tensor) -> anyhow::Result<Vec<f64>> {
     Ok((a - b)?
         .abs()?
         .flatten_from(1)?

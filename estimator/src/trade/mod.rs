@@ -40,13 +40,14 @@ use std::sync::atomic::AtomicBool;
 use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor};
 use photomat_core::image_io::write_atomic;
-use photomat_core::{FlashGeometry, FolderLock, LightSet, SplitMix64, lookup, render_with};
+use photomat_core::{FlashGeometry, FolderLock, LightSet, SplitMix64, lookup};
 use photomat_generator::GanModel;
 use photomat_generator::model_files::GAN_WEIGHTS_FILE;
 use serde::{Deserialize, Serialize};
 
 use crate::EstimatorModel;
 use crate::model_files::ESTIMATOR_MANIFEST_FILE;
+use crate::sample::{analytic_renders, neural_renders, per_light_l1};
 use crate::train::{EstimatorSettings, EstimatorTraining};
 pub use report::{Accuracy, Cost, TradeEntry, TradeReport};
 
@@ -386,14 +387,8 @@ impl Evaluation {
         for k in 0..s.materials {
             let seed = s.seed.wrapping_add(k as u64);
             let f = gan.features_for_seeds_at(&[seed], 1.0, side)?;
-            let repeated = f.repeat((lights.len(), 1, 1, 1))?;
-            let image = gan
-                .relight()
-                .forward(&repeated, &geometry.omega)?
-                .affine(0.5, 0.5)?
-                .clamp(0.0, 1.0)?;
+            neural.push(neural_renders(gan, &f, &geometry)?);
             features.push(f);
-            neural.push(image);
         }
         Ok(Self {
             features,
@@ -435,20 +430,14 @@ impl Evaluation {
         let mut ssim_sum = vec![0.0; lights];
         let mut map_bytes = None;
         for (k, (features, neural)) in self.features.iter().zip(&self.neural).enumerate() {
-            let maps = estimator.estimate(features)?;
-            let maps = match self.texel_size {
-                Some(texel) => maps.with_texel_size(Some(texel)),
-                None => maps,
-            };
-            let analytic = render_with(brdf.as_ref(), &maps, &self.geometry)?;
-            let l1: Vec<f32> = (&analytic - neural)?
-                .abs()?
-                .flatten_from(1)?
-                .mean(1)?
-                .to_vec1()?;
+            let maps = estimator
+                .estimate(features)?
+                .with_texel_size(self.texel_size);
+            let analytic = analytic_renders(brdf, &maps, &self.geometry)?;
+            let l1 = per_light_l1(&analytic, neural)?;
             let ssim = ssim::ssim(&analytic, neural)?;
             for i in 0..lights {
-                l1_sum[i] += l1[i] as f64;
+                l1_sum[i] += l1[i];
                 ssim_sum[i] += ssim[i];
             }
             if k == 0 {

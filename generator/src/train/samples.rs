@@ -31,12 +31,12 @@ pub const SAMPLE_LIGHTS: [(f64, f64); 4] = [
 /// Grey between the tiles (display value).
 const BACKGROUND: f32 = 0.5;
 
-/// Encoded [−1, 1] images → display tiles in [0, 1] (clamped: M's output is unbounded).
+/// Encoded [−1, 1] images → display tiles in [0, 1] ([`crate::relight::to_display`]).
 ///
 /// # Shapes
 /// (B, 3, R, R) → B tiles of (3, R, R).
 pub fn display_tiles(images: &Tensor) -> Result<Vec<PlanarImage>> {
-    let display = images.affine(0.5, 0.5)?.clamp(0f32, 1f32)?;
+    let display = crate::relight::to_display(images)?;
     (0..display.dim(0)?)
         .map(|i| PlanarImage::from_tensor(&display.get(i)?).map_err(candle_core::Error::wrap))
         .collect()
