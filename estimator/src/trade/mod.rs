@@ -48,7 +48,7 @@ use serde::{Deserialize, Serialize};
 use crate::EstimatorModel;
 use crate::model_files::ESTIMATOR_MANIFEST_FILE;
 use crate::sample::{analytic_renders, neural_renders, per_light_l1};
-use crate::train::{EstimatorSettings, EstimatorTraining};
+use crate::train::{EstimatorSettings, EstimatorTraining, LOG_FILE};
 pub use report::{Accuracy, Cost, TradeEntry, TradeReport};
 
 /// Lights beyond the reference five, drawn uniformly over the central half of the material
@@ -139,11 +139,9 @@ struct CacheKey {
     finetune_steps: u64,
     width: f64,
     seed: u64,
-    /// gan.json's text: architecture and provenance of the GAN.
+    /// gan.json's text: architecture and provenance of the GAN (its weights are compared
+    /// byte for byte with the cached copy before reuse).
     gan_manifest: String,
-    /// Length of gan.safetensors; with the manifest, enough to tell two GAN checkpoints apart
-    /// (the weights are also compared byte for byte before reuse).
-    gan_weights_len: u64,
 }
 
 /// A trade study: train or reuse one estimator per specification, then measure them all.
@@ -268,9 +266,6 @@ impl TradeStudy {
             seed: s.seed,
             gan_manifest: std::fs::read_to_string(&manifest)
                 .with_context(|| format!("cannot read {}", manifest.display()))?,
-            gan_weights_len: std::fs::metadata(s.gan.join(GAN_WEIGHTS_FILE))
-                .with_context(|| format!("cannot read {}", s.gan.join(GAN_WEIGHTS_FILE).display()))?
-                .len(),
         })
     }
 
@@ -291,7 +286,8 @@ impl TradeStudy {
             finetune_steps: Some(s.finetune_steps),
             width: Some(s.width),
             seed: Some(s.seed),
-            // Panels and checkpoints at the end only (and on a stop): the study reads neither.
+            // A panel at the end only (the study reads none); a checkpoint every 100 steps, so
+            // that an interrupted study loses little.
             panel_every: Some(u64::MAX),
             checkpoint_every: Some(100),
             ..EstimatorSettings::default()
@@ -329,18 +325,13 @@ impl TradeStudy {
 }
 
 /// Whether the run in `dir` has done every step of `key`'s budget.
+/// (A run without a log has done no step.)
 fn finished(dir: &Path, key: &CacheKey) -> anyhow::Result<bool> {
-    let log = dir.join("log.csv");
-    let Ok(text) = std::fs::read_to_string(&log) else {
+    if !dir.join(LOG_FILE).is_file() {
         return Ok(false);
-    };
-    let last_step = text
-        .lines()
-        .skip(1)
-        .filter_map(|line| line.split(',').next()?.parse::<u64>().ok())
-        .max()
-        .unwrap_or(0);
-    Ok(last_step >= key.steps + key.finetune_steps)
+    }
+    let last_step = log_column(dir, "step")?.into_iter().fold(0.0, f64::max);
+    Ok(last_step >= (key.steps + key.finetune_steps) as f64)
 }
 
 /// A cache folder name for a specification: `height(ggx, scale=0.02)` → `height-ggx-scale-0.02`.
@@ -466,22 +457,28 @@ impl Evaluation {
 
 /// Mean wall seconds per training step, from the run's `log.csv`.
 fn mean_step_seconds(run: &Path) -> anyhow::Result<f64> {
-    let log = run.join("log.csv");
+    let seconds = log_column(run, "seconds")?;
+    if seconds.is_empty() {
+        bail!("{} holds no training step", run.join(LOG_FILE).display());
+    }
+    Ok(seconds.iter().sum::<f64>() / seconds.len() as f64)
+}
+
+/// The values of `column` in the run's `log.csv`, one per step row (rows where it does not
+/// parse are skipped).
+fn log_column(run: &Path, column: &str) -> anyhow::Result<Vec<f64>> {
+    let log = run.join(LOG_FILE);
     let text =
         std::fs::read_to_string(&log).with_context(|| format!("cannot read {}", log.display()))?;
     let mut lines = text.lines();
     let header = lines.next().unwrap_or_default();
-    let column = header
+    let index = header
         .split(',')
-        .position(|c| c == "seconds")
-        .with_context(|| format!("{} has no 'seconds' column", log.display()))?;
-    let seconds: Vec<f64> = lines
-        .filter_map(|line| line.split(',').nth(column)?.parse().ok())
-        .collect();
-    if seconds.is_empty() {
-        bail!("{} holds no training step", log.display());
-    }
-    Ok(seconds.iter().sum::<f64>() / seconds.len() as f64)
+        .position(|c| c == column)
+        .with_context(|| format!("{} has no '{column}' column", log.display()))?;
+    Ok(lines
+        .filter_map(|line| line.split(',').nth(index)?.parse().ok())
+        .collect())
 }
 
 #[cfg(test)]

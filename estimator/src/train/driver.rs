@@ -44,6 +44,8 @@ const PANEL_MATERIALS: u64 = 2;
 const PANEL_SEED_KEY: u64 = 0x7061_6E65_6C73; // "panels"
 /// Light of the panels: off-centre, so that both the highlight and the falloff show.
 const PANEL_LIGHT: Highlight = Highlight { x: 0.2, y: 0.2 };
+/// The run's per-step log (one row per step, [`LOG_HEADER`]'s columns).
+pub const LOG_FILE: &str = "log.csv";
 /// `log.csv` header.
 const LOG_HEADER: &str = "step,stage,l1,gram,total,skipped,seconds";
 
@@ -381,7 +383,7 @@ fn checkpoint(trainer: &EstimatorTrainer, run: &Path, gan_dir: &Path) -> anyhow:
 /// Opens `run/log.csv` for appending: a new file with the header, or on resume the existing
 /// rows up to step `keep` (rows of steps after the checkpoint are dropped: they are redone).
 fn open_log(run: &Path, keep: Option<u64>) -> anyhow::Result<std::fs::File> {
-    let path = run.join("log.csv");
+    let path = run.join(LOG_FILE);
     let mut text = format!("{LOG_HEADER}\n");
     if let Some(keep) = keep
         && let Ok(old) = std::fs::read_to_string(&path)

@@ -20,7 +20,7 @@ pub mod trainer;
 
 pub use config::{Cadence, Stage, TrainConfig};
 pub use draws::StepDraws;
-pub use driver::{EstimatorOutcome, EstimatorSettings, EstimatorTraining};
+pub use driver::{EstimatorOutcome, EstimatorSettings, EstimatorTraining, LOG_FILE};
 pub use objective::{LossTerms, Objective};
 pub use state::{TRAIN_MANIFEST_FILE, TRAIN_STATE_FILE, TrainManifest, copy_gan_model};
 pub use trainer::{EstimatorTrainer, Preview, StepReport};
