@@ -191,6 +191,30 @@ impl PlanarImage {
         (i / plane, (i % plane) / self.width, i % self.width)
     }
 
+    /// Channel 0 alone, as a one-channel image.
+    pub fn first_channel(&self) -> Self {
+        Self {
+            channels: 1,
+            data: self.data[..self.texels()].to_vec(),
+            ..self.clone()
+        }
+    }
+
+    /// A one-channel image repeated into `channels` equal channels.
+    pub fn repeat_channel(&self, channels: usize) -> Result<Self> {
+        if self.channels != 1 {
+            return Err(Error::Invalid(format!(
+                "only a one-channel image can be repeated into channels, this one has {}",
+                self.channels
+            )));
+        }
+        Ok(Self {
+            channels,
+            data: self.data.repeat(channels),
+            ..self.clone()
+        })
+    }
+
     /// The same image with `f` applied to every sample.
     pub fn map(&self, f: impl Fn(f32) -> f32) -> Self {
         Self {

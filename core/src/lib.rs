@@ -39,6 +39,7 @@ pub mod render;
 pub mod rng;
 pub mod shading;
 pub mod sheet;
+pub mod simplify;
 pub mod testing;
 pub mod vecops;
 

@@ -15,6 +15,11 @@
 //!   `0.5·n + 0.5`. Values outside what the colour space can hold (e.g. a `Linear` map whose
 //!   spec range exceeds [0, 1]) are clamped in the PNG only; the EXR keeps them.
 //!
+//! With [`SaveOptions::compact`] (what `photomat sample --simplify` writes, [`crate::simplify`])
+//! a map whose texels are all exactly equal is stored as `"value": [one number per channel]`
+//! in its manifest entry, with no file, and a 3-channel map with exactly equal channels as
+//! one-channel files marked `"grey": true`; loading expands both back to (1, C, R, R) exactly.
+//!
 //! Loading ([`load_maps`]) reads the EXR of every map when the manifest names one and falls back
 //! to the PNG otherwise (so a hand-made folder of PNGs, or one whose `exr` entries were removed
 //! after editing the PNGs, loads too); PNG normals are renormalised after decoding. Every file
@@ -36,12 +41,13 @@ use candle_core::{DType, Device};
 
 use crate::brdf::{Brdf, DifferentiableBrdf};
 use crate::image_io::{
-    PlanarImage, png_header, read_exr, read_png, write_atomic, write_exr, write_png,
+    PlanarImage, encode_exr, encode_png, png_header, read_exr, read_png, write_atomic,
 };
 use crate::maps::MaterialMaps;
 use crate::param::{ColorSpace, ParamSpec};
 use crate::plugin_spec::{ArgValue, PluginSpec};
 use crate::registry::lookup;
+use crate::simplify::{constant_value, is_grey};
 use crate::{Error, Result};
 
 pub use crate::image_io::PngBits;
@@ -74,6 +80,12 @@ pub struct SaveOptions {
     /// How the model was chosen among several (`photomat sample --brdf auto`), recorded as
     /// the manifest's `selection`.
     pub selection: Option<serde_json::Value>,
+    /// Store a map whose texels are exactly equal as its value in the manifest (no file), and
+    /// a 3-channel map whose channels are exactly equal as a one-channel file
+    /// ([`crate::simplify`] makes such maps). Off by default: every map gets its files.
+    pub compact: bool,
+    /// What [`crate::simplify::simplify`] did, recorded as the manifest's `simplification`.
+    pub simplification: Option<serde_json::Value>,
 }
 
 /// The `material.json` manifest.
@@ -103,6 +115,10 @@ pub struct MapManifest {
     /// candidate's error and cost, the tolerance). Informational; omitted otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub selection: Option<serde_json::Value>,
+    /// Which maps were simplified to a constant or to grey, and the error that added
+    /// ([`crate::simplify`]). Informational; omitted otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simplification: Option<serde_json::Value>,
 }
 
 /// One map of a [`MapManifest`].
@@ -127,6 +143,19 @@ pub struct MapEntry {
     /// Physical range `[lo, hi]` of the model's spec (informative: loading checks against the
     /// spec of the model that will use the maps).
     pub range: [f32; 2],
+    /// A constant map: its physical value per channel, and then no file is named.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub value: Option<Vec<f32>>,
+    /// A grey 3-channel map: its files hold one channel, the value of all three.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub grey: bool,
+}
+
+impl MapEntry {
+    /// Channels of the map's files: 1 for a grey map, its channel count otherwise.
+    pub fn stored_channels(&self) -> usize {
+        if self.grey { 1 } else { self.channels }
+    }
 }
 
 /// A material read from a folder.
@@ -141,8 +170,10 @@ pub struct LoadedMaterial {
 }
 
 /// Write `maps` of model `brdf` into the folder `dir` (created if missing): one EXR and, for
-/// 1- and 3-channel maps, one PNG per map, then `material.json`. Files of the same names are
-/// replaced; other files in the folder are left alone.
+/// 1- and 3-channel maps, one PNG per map, then `material.json`, each atomically. With
+/// [`SaveOptions::compact`] an exactly constant map is a value in the manifest instead, and an
+/// exactly grey 3-channel map gets one-channel files. Files of the same names are replaced;
+/// other files in the folder are left alone. Returns the bytes written (files and manifest).
 ///
 /// The maps must fit the model's specs, be one material (batch 1), square, finite and inside
 /// the spec ranges (up to [`RANGE_TOLERANCE`]): a folder this function writes always loads.
@@ -151,7 +182,70 @@ pub fn save_maps(
     brdf: &dyn DifferentiableBrdf,
     maps: &MaterialMaps,
     options: &SaveOptions,
-) -> Result<()> {
+) -> Result<u64> {
+    let folder = plan_folder(brdf, maps, options)?;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| Error::file(dir, format!("cannot create the material folder: {e}")))?;
+    folder.encode_each(dir, &mut |name, bytes| write_atomic(&dir.join(name), bytes))
+}
+
+/// The bytes [`save_maps`] would write for these maps and options, computed in memory (how
+/// much a simplification saves).
+pub fn folder_bytes(
+    brdf: &dyn DifferentiableBrdf,
+    maps: &MaterialMaps,
+    options: &SaveOptions,
+) -> Result<u64> {
+    plan_folder(brdf, maps, options)?.encode_each(Path::new(""), &mut |_, _| Ok(()))
+}
+
+/// A material folder before encoding: the manifest and, per entry, the image its files hold
+/// (`None` for a constant map).
+struct PlannedFolder {
+    manifest: MapManifest,
+    images: Vec<Option<PlanarImage>>,
+    png_bits: PngBits,
+}
+
+impl PlannedFolder {
+    /// Encodes every file, maps first and the manifest last, handing each to `sink`; returns
+    /// the total of their lengths. Errors name the file inside `dir`.
+    fn encode_each(
+        &self,
+        dir: &Path,
+        sink: &mut dyn FnMut(&str, &[u8]) -> Result<()>,
+    ) -> Result<u64> {
+        let mut total = 0u64;
+        let mut put = |name: &str, bytes: std::result::Result<Vec<u8>, String>| -> Result<()> {
+            let bytes = bytes.map_err(|e| Error::file(dir.join(name), e))?;
+            total += bytes.len() as u64;
+            sink(name, &bytes)
+        };
+        let text = |e: Error| e.to_string();
+        for (entry, image) in self.manifest.maps.iter().zip(&self.images) {
+            let Some(image) = image else { continue };
+            if let Some(exr) = &entry.exr {
+                put(exr, encode_exr(image).map_err(text))?;
+            }
+            if let Some(png) = &entry.png {
+                let stored = image.map(|v| entry.color_space.to_stored(v));
+                put(png, encode_png(&stored, self.png_bits).map_err(text))?;
+            }
+        }
+        let manifest = serde_json::to_string_pretty(&self.manifest)
+            .map(|t| format!("{t}\n").into_bytes())
+            .map_err(|e| format!("cannot serialise the manifest: {e}"));
+        put(MANIFEST_FILE, manifest)?;
+        Ok(total)
+    }
+}
+
+/// Checks the maps and decides every entry and file of their folder.
+fn plan_folder(
+    brdf: &dyn DifferentiableBrdf,
+    maps: &MaterialMaps,
+    options: &SaveOptions,
+) -> Result<PlannedFolder> {
     let model = brdf.name();
     let specs = brdf.params();
     maps.validate(&model, specs)?;
@@ -180,33 +274,35 @@ pub fn save_maps(
                 ),
             });
         }
-        let image = PlanarImage::from_tensor(maps.get(spec.name)?)?;
+        let map = maps.get(spec.name)?;
+        let image = PlanarImage::from_tensor(map)?;
         check_range(&image, spec).map_err(|reason| Error::InvalidMaps {
             model: model.clone(),
             reason: format!("map '{}' {reason}", spec.name),
         })?;
-        let png = matches!(spec.channels, 1 | 3).then(|| format!("{}.png", spec.name));
+        let value = match options.compact {
+            true => constant_value(map)?,
+            false => None,
+        };
+        let grey = options.compact && value.is_none() && is_grey(map)?;
+        let stored = if grey { 1 } else { spec.channels };
+        let has_files = value.is_none();
+        let png = (has_files && matches!(stored, 1 | 3)).then(|| format!("{}.png", spec.name));
         entries.push(MapEntry {
             name: spec.name.to_string(),
             channels: spec.channels,
             png_bits: png.as_ref().map(|_| options.png_bits),
             png,
-            exr: Some(format!("{}.exr", spec.name)),
+            exr: has_files.then(|| format!("{}.exr", spec.name)),
             color_space: spec.color_space,
             range: [spec.range.0, spec.range.1],
+            value,
+            grey,
         });
-        images.push(image);
-    }
-    std::fs::create_dir_all(dir)
-        .map_err(|e| Error::file(dir, format!("cannot create the material folder: {e}")))?;
-    for (entry, image) in entries.iter().zip(&images) {
-        if let Some(exr) = &entry.exr {
-            write_exr(&dir.join(exr), image)?;
-        }
-        if let Some(png) = &entry.png {
-            let stored = image.map(|v| entry.color_space.to_stored(v));
-            write_png(&dir.join(png), &stored, options.png_bits)?;
-        }
+        images.push(has_files.then(|| match grey {
+            true => image.first_channel(),
+            false => image,
+        }));
     }
     let manifest = MapManifest {
         format: FORMAT_TAG.to_string(),
@@ -217,12 +313,13 @@ pub fn save_maps(
         texel_size: maps.texel_size(),
         maps: entries,
         selection: options.selection.clone(),
+        simplification: options.simplification.clone(),
     };
-    let path = dir.join(MANIFEST_FILE);
-    let mut text = serde_json::to_string_pretty(&manifest)
-        .map_err(|e| Error::file(&path, format!("cannot serialise the manifest: {e}")))?;
-    text.push('\n');
-    write_atomic(&path, text.as_bytes())
+    Ok(PlannedFolder {
+        manifest,
+        images,
+        png_bits: options.png_bits,
+    })
 }
 
 /// Read the material folder `dir`. The maps are validated against `brdf_override` when given
@@ -341,9 +438,38 @@ pub fn read_manifest(path: &Path) -> Result<MapManifest> {
         if !names.insert(entry.name.as_str()) {
             return Err(bad(format!("map '{}' is listed twice", entry.name)));
         }
-        if entry.png.is_none() && entry.exr.is_none() {
+        let files = entry.png.is_some() || entry.exr.is_some();
+        match &entry.value {
+            None if !files => {
+                return Err(bad(format!(
+                    "map '{}' names neither a png nor an exr file, nor a constant 'value'",
+                    entry.name
+                )));
+            }
+            Some(_) if files => {
+                return Err(bad(format!(
+                    "map '{}' names files and a constant 'value'; keep one of them",
+                    entry.name
+                )));
+            }
+            Some(value) if value.len() != entry.channels => {
+                return Err(bad(format!(
+                    "map '{}': 'value' holds {} number(s) for {} channel(s)",
+                    entry.name,
+                    value.len(),
+                    entry.channels
+                )));
+            }
+            _ => {}
+        }
+        if entry.grey
+            && (entry.channels != 3
+                || entry.value.is_some()
+                || entry.color_space == ColorSpace::UnitVector)
+        {
             return Err(bad(format!(
-                "map '{}' names neither a png nor an exr file",
+                "map '{}': 'grey' (one-channel files for three equal channels) needs a \
+                 3-channel map that is not a unit vector, stored in files",
                 entry.name
             )));
         }
@@ -385,6 +511,24 @@ fn load_map(
     spec: &ParamSpec,
     resolution: usize,
 ) -> Result<PlanarImage> {
+    if let Some(value) = &entry.value {
+        let plane = resolution * resolution;
+        let data = value
+            .iter()
+            .flat_map(|&v| std::iter::repeat_n(v, plane))
+            .collect();
+        let image = PlanarImage::new(entry.channels, resolution, resolution, data)?;
+        let manifest = dir.join(MANIFEST_FILE);
+        if value.iter().any(|v| !v.is_finite()) {
+            return Err(Error::file(
+                &manifest,
+                format!("map '{}': 'value' {value:?} is not finite", entry.name),
+            ));
+        }
+        check_range(&image, spec)
+            .map_err(|reason| Error::file(&manifest, format!("map '{}' {reason}", spec.name)))?;
+        return Ok(image);
+    }
     let path_of = |file: &String| dir.join(file);
     let (png, exr) = (
         entry.png.as_ref().map(path_of),
@@ -459,7 +603,11 @@ fn load_map(
             }
             (png, image)
         }
-        (None, None) => unreachable!("read_manifest rejects entries without files"),
+        (None, None) => unreachable!("read_manifest rejects entries without files or value"),
+    };
+    let image = match entry.grey {
+        true => image.repeat_channel(entry.channels)?,
+        false => image,
     };
     check_range(&image, spec)
         .map_err(|reason| Error::file(&path, format!("map '{}' {reason}", spec.name)))?;
@@ -475,12 +623,14 @@ fn check_layout(
     width: usize,
     resolution: usize,
 ) -> Result<()> {
-    if channels != entry.channels {
+    if channels != entry.stored_channels() {
         return Err(Error::file(
             path,
             format!(
-                "has {channels} channel(s), map '{}' needs {} (material.json)",
-                entry.name, entry.channels
+                "has {channels} channel(s), map '{}' needs {} (material.json{})",
+                entry.name,
+                entry.stored_channels(),
+                if entry.grey { ": a grey map" } else { "" }
             ),
         ));
     }

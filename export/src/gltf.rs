@@ -298,16 +298,26 @@ pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
 
     let mut extensions = BTreeMap::new();
     // Without a specular map the model has no specular lobe (lambert): weight 0.
-    let specular = match &specular_texture {
-        Some(info) => json!({
+    let factors = &textures.factors;
+    let specular = match (&specular_texture, factors.specular_color) {
+        (Some(info), _) => json!({
             "specularFactor": 1.0,
             "specularColorFactor": [1.0 / DIELECTRIC_F0, 1.0 / DIELECTRIC_F0, 1.0 / DIELECTRIC_F0],
             "specularColorTexture": { "index": info.index },
         }),
-        None => json!({ "specularFactor": 0.0 }),
+        (None, Some(f0)) => json!({
+            "specularFactor": 1.0,
+            "specularColorFactor": f0.map(|v| v / DIELECTRIC_F0),
+        }),
+        (None, None) => json!({ "specularFactor": 0.0 }),
     };
     extensions.insert(KHR_MATERIALS_SPECULAR.to_string(), specular);
-    if let Some(info) = &clearcoat_texture {
+    if let Some([weight, roughness]) = factors.clearcoat {
+        extensions.insert(
+            KHR_MATERIALS_CLEARCOAT.to_string(),
+            json!({ "clearcoatFactor": weight, "clearcoatRoughnessFactor": roughness }),
+        );
+    } else if let Some(info) = &clearcoat_texture {
         extensions.insert(
             KHR_MATERIALS_CLEARCOAT.to_string(),
             json!({
@@ -323,13 +333,16 @@ pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
         name: name.to_string(),
         pbr_metallic_roughness: PbrMetallicRoughness {
             // Without a diffuse map the base is black (no diffuse reflection).
-            base_color_factor: match base_color_texture {
-                Some(_) => [1.0; 4],
-                None => [0.0, 0.0, 0.0, 1.0],
+            base_color_factor: match (&base_color_texture, factors.base_color) {
+                (Some(_), _) => [1.0; 4],
+                (None, Some([r, g, b])) => [r, g, b, 1.0],
+                (None, None) => [0.0, 0.0, 0.0, 1.0],
             },
             base_color_texture,
             metallic_factor: 0.0,
-            roughness_factor: 1.0,
+            // A roughness texture is scaled by 1; a constant roughness is the factor itself;
+            // without roughness the material is fully rough.
+            roughness_factor: factors.roughness.unwrap_or(1.0),
             metallic_roughness_texture,
         },
         normal_texture,

@@ -29,4 +29,4 @@ pub mod textures;
 pub use gltf::write_gltf;
 pub use hextile::{HexTiling, hextile};
 pub use materialx::write_materialx;
-pub use textures::{TextureSet, write_textures};
+pub use textures::{Factors, TextureSet, write_textures};

@@ -167,7 +167,32 @@ pub fn materialx_document(textures: &TextureSet, name: &str) -> String {
             r#"    <input name="{input}" type="{kind}" nodegraph="{graph}" output="{out}" />"#
         ));
     }
-    let has = |input: &str| connected.iter().any(|(i, _, _)| *i == input);
+    let factors = &textures.factors;
+    let color = |c: [f32; 3]| format!("{}, {}, {}", c[0], c[1], c[2]);
+    // Constant maps are input values (linear, as UsdPreviewSurface reads unconnected inputs).
+    let mut constants: Vec<(&str, &str, String)> = Vec::new();
+    if let Some(c) = factors.base_color {
+        constants.push(("diffuseColor", "color3", color(c)));
+    }
+    if let Some(c) = factors.specular_color {
+        constants.push(("specularColor", "color3", color(c)));
+    }
+    if let Some(r) = factors.roughness {
+        constants.push(("roughness", "float", r.to_string()));
+    }
+    if let Some([weight, roughness]) = factors.clearcoat {
+        constants.push(("clearcoat", "float", weight.to_string()));
+        constants.push(("clearcoatRoughness", "float", roughness.to_string()));
+    }
+    for (input, kind, value) in &constants {
+        line(format!(
+            r#"    <input name="{input}" type="{kind}" value="{value}" />"#
+        ));
+    }
+    let has = |input: &str| {
+        connected.iter().any(|(i, _, _)| *i == input)
+            || constants.iter().any(|(i, _, _)| *i == input)
+    };
     // Defaults for maps the model lacks: no diffuse → black base; no specular → no lobe; no
     // roughness → fully rough.
     if !has("diffuseColor") {

@@ -23,6 +23,11 @@
 //! 1/0.04 = 25: every F0 in [0, 1] is represented exactly. UsdPreviewSurface takes F0 directly
 //! (`useSpecularWorkflow = 1`).
 //!
+//! A map whose texels are all exactly equal (`photomat sample --simplify` makes them,
+//! `photomat_core::simplify`) is written as a constant of the material ([`Factors`]: glTF's
+//! `baseColorFactor`, `roughnessFactor`, `specularColorFactor`, `clearcoatFactor`; MaterialX
+//! input values) instead of a texture, and a normal map of +z everywhere as no normal map.
+//!
 //! What renderers cannot take is never dropped silently: [`TextureSet::dropped`] lists every
 //! shading map without an equivalent and [`TextureSet::approximations`] every lossy mapping,
 //! per built-in plugin:
@@ -43,6 +48,7 @@
 use std::path::Path;
 
 use photomat_core::image_io::{PlanarImage, PngBits, write_png};
+use photomat_core::simplify::{LUMINANCE, constant_value};
 use photomat_core::{DifferentiableBrdf, Error, MaterialMaps, Result};
 
 /// F0 of a dielectric of ior 1.5, `((ior − 1)/(ior + 1))²`: glTF's and UsdPreviewSurface's
@@ -63,8 +69,24 @@ pub mod files {
     pub const CLEARCOAT: &str = "clearcoat.png";
 }
 
+/// Constant values that replace textures: a shading map whose texels are exactly equal
+/// (`photomat_core::simplify::constant_value`, what `sample --simplify` makes) is written as a
+/// factor of the material, not as an image.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Factors {
+    /// Linear base colour (diffuse albedo).
+    pub base_color: Option<[f32; 3]>,
+    /// Roughness (glTF's and UsdPreviewSurface's convention, as the maps').
+    pub roughness: Option<f32>,
+    /// Linear specular colour F0.
+    pub specular_color: Option<[f32; 3]>,
+    /// Clear-coat weight and roughness.
+    pub clearcoat: Option<[f32; 2]>,
+}
+
 /// What [`write_textures`] wrote and how renderers should use it. File names are relative to
-/// the folder it wrote into.
+/// the folder it wrote into; a map that is a constant has a factor in [`Self::factors`] and no
+/// file.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TextureSet {
     /// Canonical model specification of the material (`DifferentiableBrdf::name`).
@@ -81,6 +103,8 @@ pub struct TextureSet {
     pub normal: Option<String>,
     /// R = clear-coat weight, G = clear-coat roughness (present for `specular2`+`roughness2`).
     pub clearcoat: Option<String>,
+    /// Constant maps, written as values instead of files.
+    pub factors: Factors,
     /// Shading maps with no renderer equivalent, each with the reason.
     pub dropped: Vec<String>,
     /// Lossy mappings, one sentence each.
@@ -113,9 +137,6 @@ pub fn srgb_encode(linear: f32) -> f32 {
         1.055 * x.powf(1.0 / 2.4) - 0.055
     }
 }
-
-/// Rec. 709 luminance weights (linear rgb), as glTF and MaterialX use.
-const LUMINANCE: [f32; 3] = [0.2126, 0.7152, 0.0722];
 
 /// Map names [`write_textures`] consumes.
 const MAPPED: [&str; 6] = [
@@ -164,13 +185,25 @@ pub fn write_textures(
         specular_color: None,
         normal: None,
         clearcoat: None,
+        factors: Factors::default(),
         dropped: Vec::new(),
         approximations: Vec::new(),
     };
-    if let Some(diffuse) = image("diffuse")? {
+    let constant = |name: &str| -> Result<Option<Vec<f32>>> {
+        match shading.contains(name) {
+            true => constant_value(shading.get(name)?),
+            false => Ok(None),
+        }
+    };
+    let rgb = |v: Vec<f32>| [v[0], v[1], v[2]];
+    if let Some(value) = constant("diffuse")? {
+        set.factors.base_color = Some(rgb(value));
+    } else if let Some(diffuse) = image("diffuse")? {
         set.base_color = Some(write(files::BASE_COLOR, &diffuse.map(srgb_encode))?);
     }
-    if let Some(roughness) = image("roughness")? {
+    if let Some(value) = constant("roughness")? {
+        set.factors.roughness = Some(value[0]);
+    } else if let Some(roughness) = image("roughness")? {
         let plane = roughness.texels();
         let r = &roughness.data[..plane];
         let packed = [vec![1.0; plane], r.to_vec(), vec![0.0; plane]].concat();
@@ -179,37 +212,35 @@ pub fn write_textures(
             &PlanarImage::new(3, height, width, packed)?,
         )?);
     }
-    if let Some(specular) = image("specular")? {
+    if let Some(value) = constant("specular")? {
+        set.factors.specular_color = Some(rgb(value));
+    } else if let Some(specular) = image("specular")? {
         set.specular_color = Some(write(files::SPECULAR_COLOR, &specular.map(srgb_encode))?);
     }
-    if let Some(normal) = image("normal")? {
+    // A normal map of +z everywhere is the flat default: no texture.
+    let flat = constant("normal")?.is_some_and(|n| n[0] == 0.0 && n[1] == 0.0 && n[2] > 0.0);
+    if let Some(normal) = image("normal")?.filter(|_| !flat) {
         set.normal = Some(write(files::NORMAL, &encode_normal(&normal))?);
     }
+    let coat = (constant("specular2")?, constant("roughness2")?);
     match (image("specular2")?, image("roughness2")?) {
+        _ if let (Some(specular2), Some(roughness2)) = &coat => {
+            let texel = PlanarImage::new(3, 1, 1, specular2.clone())?;
+            let (weight, clipped) = clearcoat_weight(&texel);
+            set.factors.clearcoat = Some([weight[0], roughness2[0]]);
+            set.approximations
+                .push(clearcoat_note(100.0 * clipped as f64));
+        }
         (Some(specular2), Some(roughness2)) => {
             let plane = specular2.texels();
-            let mut clipped = 0usize;
-            let weight: Vec<f32> = (0..plane)
-                .map(|t| {
-                    let lum: f32 = (0..3)
-                        .map(|c| LUMINANCE[c] * specular2.data[c * plane + t])
-                        .sum();
-                    let w = lum / DIELECTRIC_F0;
-                    clipped += usize::from(w > 1.0);
-                    w.min(1.0)
-                })
-                .collect();
+            let (weight, clipped) = clearcoat_weight(&specular2);
             let packed = [weight, roughness2.data[..plane].to_vec(), vec![0.0; plane]].concat();
             set.clearcoat = Some(write(
                 files::CLEARCOAT,
                 &PlanarImage::new(3, height, width, packed)?,
             )?);
-            set.approximations.push(format!(
-                "specular2 → clear-coat weight = luminance(specular2)/{DIELECTRIC_F0} clamped to \
-                 1 (the clear coat's F0 is fixed at {DIELECTRIC_F0} and achromatic): colour \
-                 dropped, {:.1} % of texels clipped",
-                100.0 * clipped as f64 / plane as f64
-            ));
+            set.approximations
+                .push(clearcoat_note(100.0 * clipped as f64 / plane as f64));
         }
         (one, other) => {
             for (name, present) in [
@@ -224,7 +255,11 @@ pub fn write_textures(
             }
         }
     }
-    if set.specular_color.is_some() || set.clearcoat.is_some() {
+    if set.specular_color.is_some()
+        || set.clearcoat.is_some()
+        || set.factors.specular_color.is_some()
+        || set.factors.clearcoat.is_some()
+    {
         set.approximations.push(
             "renderers layer the specular over the diffuse base and darken the base by the \
              layer's Fresnel reflectance; photomat adds the lobes"
@@ -238,6 +273,33 @@ pub fn write_textures(
         }
     }
     Ok(set)
+}
+
+/// The clear-coat weight per texel of a `specular2` image, `min(lum(F0₂)/0.04, 1)`, and how
+/// many texels the clamp clipped.
+fn clearcoat_weight(specular2: &PlanarImage) -> (Vec<f32>, usize) {
+    let plane = specular2.texels();
+    let mut clipped = 0usize;
+    let weight = (0..plane)
+        .map(|t| {
+            let lum: f32 = (0..3)
+                .map(|c| LUMINANCE[c] * specular2.data[c * plane + t])
+                .sum();
+            let w = lum / DIELECTRIC_F0;
+            clipped += usize::from(w > 1.0);
+            w.min(1.0)
+        })
+        .collect();
+    (weight, clipped)
+}
+
+/// The approximation note of the clear coat, with the percentage of clipped texels.
+fn clearcoat_note(clipped_percent: f64) -> String {
+    format!(
+        "specular2 → clear-coat weight = luminance(specular2)/{DIELECTRIC_F0} clamped to 1 \
+         (the clear coat's F0 is fixed at {DIELECTRIC_F0} and achromatic): colour dropped, \
+         {clipped_percent:.1} % of texels clipped"
+    )
 }
 
 /// Unit normals (x right, y up, z out) → `0.5·n + 0.5` after renormalising (the normal map

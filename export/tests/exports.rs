@@ -380,3 +380,60 @@ fn materialx_parses_and_references_existing_files_and_nodes() {
         }
     }
 }
+
+/// A map whose texels are all equal (what `sample --simplify` makes) is a factor, not a
+/// texture, in the texture set, the glTF document and the MaterialX document.
+#[test]
+fn exports_write_constant_maps_as_factors() {
+    let (brdf, mut maps) = material("ggx", 11);
+    let constant = |values: &[f32]| {
+        let data = values
+            .iter()
+            .flat_map(|&v| std::iter::repeat_n(v, SIZE * SIZE))
+            .collect();
+        Tensor::from_vec(data, (1, values.len(), SIZE, SIZE), &Device::Cpu).unwrap()
+    };
+    maps.insert("roughness", constant(&[0.375]));
+    maps.insert("normal", constant(&[0.0, 0.0, 1.0]));
+    maps.insert("specular", constant(&[0.04, 0.05, 0.06]));
+    let temp = tempfile::tempdir().unwrap();
+    let set = write_textures(temp.path(), brdf.as_ref(), &maps).unwrap();
+    assert!(set.base_color.is_some());
+    assert_eq!(set.metallic_roughness, None);
+    assert_eq!(set.normal, None);
+    assert_eq!(set.specular_color, None);
+    assert_eq!(set.factors.roughness, Some(0.375));
+    assert_eq!(set.factors.specular_color, Some([0.04, 0.05, 0.06]));
+    assert_eq!(set.files(), vec!["base_color.png"]);
+    let gltf = write_gltf(temp.path(), "m", &set).unwrap();
+    let doc: Value = serde_json::from_str(&std::fs::read_to_string(gltf).unwrap()).unwrap();
+    let material = &doc["materials"][0];
+    assert_eq!(material["pbrMetallicRoughness"]["roughnessFactor"], 0.375);
+    assert!(
+        material["pbrMetallicRoughness"]
+            .get("metallicRoughnessTexture")
+            .is_none()
+    );
+    assert!(material.get("normalTexture").is_none());
+    let specular = &material["extensions"]["KHR_materials_specular"];
+    let factor: Vec<f64> = specular["specularColorFactor"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    for (f, f0) in factor.iter().zip([0.04, 0.05, 0.06]) {
+        assert!((f * 0.04 - f0).abs() < 1e-6, "{factor:?}");
+    }
+    assert!(specular.get("specularColorTexture").is_none());
+    let mtlx = photomat_export::materialx::materialx_document(&set, "m");
+    assert!(
+        mtlx.contains(r#"<input name="roughness" type="float" value="0.375" />"#),
+        "{mtlx}"
+    );
+    assert!(
+        mtlx.contains(r#"name="specularColor" type="color3" value="0.04, 0.05, 0.06""#),
+        "{mtlx}"
+    );
+    assert_eq!(mtlx.matches(r#"name="roughness""#).count(), 1, "{mtlx}");
+}

@@ -1,5 +1,6 @@
 //! `photomat sample [--model MODEL] --count N --out OUT [--seed S] [--psi ψ] [--tileable]
-//! [--hextile] [--gltf] [--mtlx] [--size-render PX] [--brdf SPEC|auto [--tolerance T]]`: the
+//! [--hextile] [--gltf] [--mtlx] [--size-render PX] [--brdf SPEC|auto] [--simplify]
+//! [--tolerance T]`: the
 //! product's main job, the reference
 //! tool's sampler. The pipeline is the library's [`photomat_estimator::sample::Sampler`]
 //! (what it writes under `OUT/seed-XXXX/`, the contact sheet and `summary.json` are described
@@ -104,7 +105,16 @@ pub struct Args {
     #[arg(long, value_name = "SPEC|auto")]
     pub brdf: Option<String>,
 
-    /// With --brdf auto: accepted L1 above the best model's, relative (0.1 = 10 %).
+    /// Store only the maps a material requires: a map whose constant (its mean) keeps the
+    /// material's L1 against M's relighting within --tolerance, of linear radiance and of
+    /// display-encoded images alike, becomes a value in material.json (a factor in the --gltf / --mtlx exports), a colour map whose grey
+    /// (luminance) does becomes one channel. material.json and summary.json record what was
+    /// simplified, the error added and the bytes saved.
+    #[arg(long)]
+    pub simplify: bool,
+
+    /// With --brdf auto: accepted L1 above the best model's; with --simplify: accepted L1
+    /// above the material's own before simplifying. Relative (0.1 = 10 %).
     #[arg(long, value_name = "T", default_value_t = DEFAULT_TOLERANCE)]
     pub tolerance: f64,
 }
@@ -150,6 +160,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             Some(text) => BrdfChoice::parse(text, args.tolerance)?,
             None => BrdfChoice::Default,
         },
+        simplify: args.simplify.then_some(args.tolerance),
     };
     let bar = progress_bar(
         args.count as u64,
@@ -228,6 +239,34 @@ fn report(
             "  --brdf auto (tolerance {}): {}",
             args.tolerance,
             counts.join(", ")
+        )?;
+    }
+    if let Some(totals) = &summary.simplification {
+        let counts: Vec<String> = totals
+            .counts
+            .iter()
+            .map(|(what, n)| format!("{n} × {what}"))
+            .collect();
+        let saved = totals.bytes_before.saturating_sub(totals.bytes_after);
+        writeln!(
+            out,
+            "  --simplify (tolerance {}): {}; {:.1} MB of {:.1} MB saved ({:.0} %); {}",
+            args.tolerance,
+            if counts.is_empty() {
+                "no map could be simplified".to_string()
+            } else {
+                counts.join(", ")
+            },
+            saved as f64 / 1e6,
+            totals.bytes_before as f64 / 1e6,
+            100.0 * saved as f64 / totals.bytes_before.max(1) as f64,
+            (0..totals.metrics.len())
+                .map(|i| format!(
+                    "{} {:.4} → {:.4}",
+                    totals.metrics[i], totals.error_before[i], totals.error_after[i]
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
         )?;
     }
     Ok(())

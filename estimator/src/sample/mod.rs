@@ -55,9 +55,10 @@ use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor};
 use photomat_core::folder_lock::clear_previous_outputs;
 use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
-use photomat_core::map_files::{SaveOptions, save_maps};
+use photomat_core::map_files::{SaveOptions, folder_bytes, save_maps};
 use photomat_core::previews::map_previews;
 use photomat_core::sheet::{grid, resize_square};
+use photomat_core::simplify::simplify;
 use photomat_core::{Brdf, FlashGeometry, FolderLock, LightSet, MaterialMaps, render_with};
 use photomat_generator::GanModel;
 use photomat_generator::model_files::GAN_MANIFEST_FILE;
@@ -65,7 +66,7 @@ use photomat_generator::model_files::GAN_MANIFEST_FILE;
 use crate::EstimatorModel;
 use crate::model_files::ESTIMATOR_MANIFEST_FILE;
 pub use choice::{BrdfChoice, Candidate, DEFAULT_TOLERANCE, ESTIMATORS_DIR, Selection};
-pub use summary::{MaterialSummary, SampleSummary, Timings};
+pub use summary::{MaterialSummary, SampleSummary, SimplifyTotals, Timings};
 
 /// Materials shown in the contact sheet (the first ones of the run): 64 rows of 128-pixel
 /// tiles are already an 8,400-pixel-tall image; the per-material PNGs hold every material.
@@ -77,6 +78,11 @@ pub const SHEET_MAX_TILE: usize = 128;
 /// Texels relit and rendered per call: all 5 lights at up to 512² (≈ 1.3 M texels, a few
 /// hundred MB of intermediates), fewer lights at a time above.
 pub const LIGHT_BATCH_TEXELS: usize = 5 * 512 * 512;
+
+/// The errors `--simplify` keeps within its tolerance, both against M's renders under the
+/// reference lights: the L1 of linear radiance (dominated by the highlight, as `--brdf auto`
+/// compares) and the L1 of display-encoded images (which also sees the texture away from it).
+pub const SIMPLIFY_METRICS: [&str; 2] = ["l1_linear", "l1_display"];
 
 /// Name of the contact sheet in the output folder.
 pub const CONTACT_SHEET_FILE: &str = "contact_sheet.png";
@@ -116,6 +122,11 @@ pub struct SampleOptions {
     pub overwrite: bool,
     /// Which estimator, and so which BRDF model, each material gets ([`choice`]).
     pub brdf: BrdfChoice,
+    /// Simplify each material's maps ([`photomat_core::simplify`]) within this relative
+    /// tolerance of both its errors against M's renders ([`SIMPLIFY_METRICS`]): constant maps
+    /// become values in material.json and factors in the exports, near-grey colour maps one
+    /// channel.
+    pub simplify: Option<f64>,
 }
 
 impl Default for SampleOptions {
@@ -132,6 +143,7 @@ impl Default for SampleOptions {
             render_size: None,
             overwrite: false,
             brdf: BrdfChoice::Default,
+            simplify: None,
         }
     }
 }
@@ -465,6 +477,42 @@ impl Job<'_> {
         let (estimator, maps, analytic, l1, _) = scored.swap_remove(chosen);
         let brdf = estimator.brdf();
         let inner = brdf.innermost();
+        let mut save_options = SaveOptions {
+            selection: selection.as_ref().map(serde_json::to_value).transpose()?,
+            ..SaveOptions::default()
+        };
+        let (maps, analytic, l1, simplification) = match options.simplify {
+            None => (maps, analytic, l1, None),
+            Some(tolerance) => {
+                let stage = Instant::now();
+                let gamma = photomat_core::render::DISPLAY_GAMMA;
+                let linear_neural = neural.powf(gamma)?;
+                let simplified = simplify(brdf.as_ref(), &maps, tolerance, |m| {
+                    let analytic = analytic_renders(brdf, m, self.geometry)?;
+                    let linear = analytic.powf(gamma)?;
+                    Ok::<_, anyhow::Error>(vec![
+                        mean(&per_light_l1(&linear, &linear_neural)?),
+                        mean(&per_light_l1(&analytic, &neural)?),
+                    ])
+                })
+                .with_context(|| format!("seed {seed}: cannot simplify the maps"))?;
+                let bytes_before = folder_bytes(brdf.as_ref(), &maps, &save_options)?;
+                save_options.compact = true;
+                let bytes_after = folder_bytes(brdf.as_ref(), &simplified.maps, &save_options)?;
+                let record = simplified.record(&SIMPLIFY_METRICS, bytes_before, bytes_after);
+                save_options.simplification = Some(serde_json::to_value(&record)?);
+                let (maps, analytic, l1) = match simplified.steps.is_empty() {
+                    true => (maps, analytic, l1),
+                    false => {
+                        let analytic = analytic_renders(brdf, &simplified.maps, self.geometry)?;
+                        let l1 = per_light_l1(&analytic, &neural)?;
+                        (simplified.maps, analytic, l1)
+                    }
+                };
+                timings.simplify += stage.elapsed().as_secs_f64();
+                (maps, analytic, l1, Some(record))
+            }
+        };
 
         let stage = Instant::now();
         let tile = self.tile;
@@ -492,10 +540,7 @@ impl Job<'_> {
             &folder.join("material"),
             brdf.as_ref(),
             &maps,
-            &SaveOptions {
-                selection: selection.as_ref().map(serde_json::to_value).transpose()?,
-                ..SaveOptions::default()
-            },
+            &save_options,
         )
         .with_context(|| format!("cannot write the maps of seed {seed}"))?;
         let strip = |tiles: &[PlanarImage]| grid(&[tiles.to_vec()], 0.0);
@@ -556,6 +601,7 @@ impl Job<'_> {
                 folder: folder.display().to_string(),
                 brdf: brdf.name(),
                 selection,
+                simplification,
                 l1_mean: mean(&l1),
                 l1_per_light: l1,
             },

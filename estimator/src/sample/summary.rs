@@ -17,6 +17,8 @@ pub struct Timings {
     pub render: f64,
     /// The 2×2 tiled and hex-tiled renders.
     pub extras: f64,
+    /// Simplifying the maps (`--simplify`: the renders of each candidate form).
+    pub simplify: f64,
     /// Writing maps, PNGs, exports and the contact sheet.
     pub write: f64,
     /// The whole run.
@@ -26,7 +28,13 @@ pub struct Timings {
 impl Timings {
     /// The per-material stages: everything but loading.
     pub fn per_material(&self) -> f64 {
-        self.generate + self.estimate + self.relight + self.render + self.extras + self.write
+        self.generate
+            + self.estimate
+            + self.relight
+            + self.render
+            + self.simplify
+            + self.extras
+            + self.write
     }
 }
 
@@ -42,6 +50,10 @@ pub struct MaterialSummary {
     /// How that model was chosen (`--brdf auto` only).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub selection: Option<super::Selection>,
+    /// Which maps were simplified, the error that added and the bytes saved (`--simplify`
+    /// only).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub simplification: Option<photomat_core::simplify::SimplifyRecord>,
     /// L1 analytic vs neural per light, display-encoded [0, 1].
     pub l1_per_light: Vec<f64>,
     /// Mean of [`Self::l1_per_light`].
@@ -70,6 +82,9 @@ pub struct SampleSummary {
     pub seeds: Vec<u64>,
     /// One entry per material, in seed order.
     pub materials: Vec<MaterialSummary>,
+    /// What `--simplify` did over the run (absent without it).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub simplification: Option<SimplifyTotals>,
     /// Mean over materials of the L1 per light.
     pub l1_per_light: Vec<f64>,
     /// Mean of [`Self::l1_per_light`].
@@ -78,6 +93,60 @@ pub struct SampleSummary {
     pub timings_s: Timings,
     /// Materials per minute of the per-material stages.
     pub materials_per_minute: f64,
+}
+
+/// The simplifications of a run, summed over its materials.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct SimplifyTotals {
+    /// How many materials had each map made `constant` or `grey`, keyed `map: form`.
+    pub counts: std::collections::BTreeMap<String, usize>,
+    /// Bytes of the material folders before and after.
+    pub bytes_before: u64,
+    /// See [`Self::bytes_before`].
+    pub bytes_after: u64,
+    /// What each error measures (`super::SIMPLIFY_METRICS`).
+    pub metrics: Vec<String>,
+    /// Mean over materials of each error before and after.
+    pub error_before: Vec<f64>,
+    /// See [`Self::error_before`].
+    pub error_after: Vec<f64>,
+}
+
+use photomat_core::simplify::SimplifyRecord;
+
+impl SimplifyTotals {
+    /// The totals of the materials that were simplified; `None` when none was.
+    pub fn of(materials: &[MaterialSummary]) -> Option<Self> {
+        let records: Vec<_> = materials
+            .iter()
+            .filter_map(|m| m.simplification.as_ref())
+            .collect();
+        if records.is_empty() {
+            return None;
+        }
+        let mut counts = std::collections::BTreeMap::new();
+        for step in records.iter().flat_map(|r| &r.steps) {
+            let form = match step.form {
+                photomat_core::simplify::MapForm::Constant(_) => "constant",
+                photomat_core::simplify::MapForm::Grey => "grey",
+            };
+            *counts.entry(format!("{}: {form}", step.map)).or_insert(0) += 1;
+        }
+        let n = records.len() as f64;
+        let mean = |errors: &dyn Fn(&SimplifyRecord) -> &Vec<f64>| -> Vec<f64> {
+            (0..errors(records[0]).len())
+                .map(|i| records.iter().map(|r| errors(r)[i]).sum::<f64>() / n)
+                .collect()
+        };
+        Some(Self {
+            counts,
+            bytes_before: records.iter().map(|r| r.bytes_before).sum(),
+            bytes_after: records.iter().map(|r| r.bytes_after).sum(),
+            metrics: records[0].metrics.clone(),
+            error_before: mean(&|r| &r.error_before),
+            error_after: mean(&|r| &r.error_after),
+        })
+    }
 }
 
 impl SampleSummary {
@@ -114,6 +183,7 @@ impl SampleSummary {
             tileable_model,
             lights,
             seeds: materials.iter().map(|m| m.seed).collect(),
+            simplification: SimplifyTotals::of(&materials),
             materials,
             l1_per_light,
             l1_mean,
@@ -134,6 +204,7 @@ mod tests {
             folder: String::new(),
             brdf: "ggx".into(),
             selection: None,
+            simplification: None,
             l1_mean: l1.iter().sum::<f64>() / l1.len() as f64,
             l1_per_light: l1,
         };
@@ -160,5 +231,60 @@ mod tests {
         assert!((s.l1_mean - 0.3).abs() < 1e-12);
         // Two materials in the 3 s of per-material stages (loading excluded): 40 per minute.
         assert!((s.materials_per_minute - 40.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn simplify_totals_count_forms_and_sum_bytes() {
+        use photomat_core::simplify::{MapForm, SimplifyStep};
+        let step = |map: &str, form| SimplifyStep {
+            map: map.into(),
+            form,
+            error: vec![0.0],
+        };
+        let material = |record: Option<SimplifyRecord>| MaterialSummary {
+            seed: 0,
+            folder: String::new(),
+            brdf: "ggx".into(),
+            selection: None,
+            simplification: record,
+            l1_per_light: vec![0.0],
+            l1_mean: 0.0,
+        };
+        let record = |steps, before, after, e0, e1| SimplifyRecord {
+            tolerance: 0.1,
+            metrics: vec!["l1".into()],
+            error_before: vec![e0],
+            error_after: vec![e1],
+            steps,
+            bytes_before: before,
+            bytes_after: after,
+        };
+        assert_eq!(SimplifyTotals::of(&[material(None)]), None);
+        let totals = SimplifyTotals::of(&[
+            material(Some(record(
+                vec![
+                    step("roughness", MapForm::Constant(vec![0.5])),
+                    step("specular", MapForm::Grey),
+                ],
+                1000,
+                400,
+                0.1,
+                0.12,
+            ))),
+            material(Some(record(
+                vec![step("roughness", MapForm::Constant(vec![0.2]))],
+                1000,
+                800,
+                0.3,
+                0.3,
+            ))),
+        ])
+        .unwrap();
+        assert_eq!(totals.counts.get("roughness: constant"), Some(&2));
+        assert_eq!(totals.counts.get("specular: grey"), Some(&1));
+        assert_eq!((totals.bytes_before, totals.bytes_after), (2000, 1200));
+        assert_eq!(totals.metrics, ["l1"]);
+        assert!((totals.error_before[0] - 0.2).abs() < 1e-12);
+        assert!((totals.error_after[0] - 0.21).abs() < 1e-12);
     }
 }
