@@ -8,6 +8,7 @@
 //! `TrainingData` (this crate implements the generator's trait).
 
 pub mod dataset;
+pub mod discriminator_probe;
 pub mod highlight;
 pub mod light_following;
 pub mod patch;

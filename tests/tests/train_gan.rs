@@ -270,3 +270,88 @@ fn train_gan_resume_keeps_the_cadence_may_lower_the_lr_and_the_folder_is_locked(
         .to_string();
     assert!(err.contains("is in use by process"), "{err}");
 }
+
+/// `eval-gan --discriminator` on a run folder reports D's logits per kind of image, seeded and
+/// finite, at the run's step; on a GAN folder without D it names what it needs.
+#[test]
+fn eval_gan_discriminator_probe_reads_the_runs_d() {
+    second_order();
+    let dir = tempfile::tempdir().unwrap();
+    let data = simulated_dataset(dir.path(), 64);
+    let data = path_str(&data).to_string();
+    let run = dir.path().join("run");
+    let flags: Vec<&str> = TINY.iter().copied().chain(["--steps", "2"]).collect();
+    train(Some(&data), &run, &flags).unwrap();
+    let probe = |seed: &str| -> serde_json::Value {
+        let printed = photomat(&[
+            "eval-gan",
+            "--gan",
+            path_str(&run),
+            "--data",
+            &data,
+            "--count",
+            "4",
+            "--seed",
+            seed,
+            "--discriminator",
+            "--json",
+        ])
+        .unwrap();
+        serde_json::from_str::<serde_json::Value>(&printed).unwrap()["discriminator"].clone()
+    };
+    let p = probe("1");
+    assert_eq!(p["step"], 2);
+    assert_eq!(p["count"], 4);
+    let rows = ["reals", "reals_other_lights", "fakes", "fakes_other_lights"];
+    for row in rows {
+        assert!(p[row].as_f64().unwrap().is_finite(), "{row}: {p}");
+    }
+    let blurred: Vec<f64> = p["reals_blurred"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert_eq!(blurred.len(), 2);
+    // Blurring changes what D sees; the seed fixes every draw.
+    assert!(
+        blurred.iter().all(|&b| b != p["reals"].as_f64().unwrap()),
+        "{p}"
+    );
+    assert_eq!(probe("1"), p);
+    assert_ne!(probe("2")["reals"], p["reals"]);
+
+    let table = photomat(&[
+        "eval-gan",
+        "--gan",
+        path_str(&run),
+        "--data",
+        &data,
+        "--count",
+        "4",
+        "--seed",
+        "1",
+        "--discriminator",
+    ])
+    .unwrap();
+    assert!(table.contains("what D looks at (step 2"), "{table}");
+    assert!(table.contains("texture gap"), "{table}");
+
+    // A GAN model folder without the run's state has no D to probe.
+    let gan_only = dir.path().join("gan-only");
+    std::fs::create_dir_all(&gan_only).unwrap();
+    for f in ["gan.json", "gan.safetensors"] {
+        std::fs::copy(run.join(f), gan_only.join(f)).unwrap();
+    }
+    let err = photomat_error(&[
+        "eval-gan",
+        "--gan",
+        path_str(&gan_only),
+        "--data",
+        &data,
+        "--count",
+        "4",
+        "--discriminator",
+    ]);
+    assert!(err.contains("train-gan` run folder"), "{err}");
+}

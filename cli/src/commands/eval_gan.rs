@@ -1,4 +1,5 @@
-//! `photomat eval-gan --gan RUN --data DATASET [--count 256] [--seed S] [--json]`: the GAN
+//! `photomat eval-gan --gan RUN --data DATASET [--count 256] [--seed S] [--discriminator]
+//! [--json]`: the GAN
 //! quality metric (`docs/neural-models.md`, "GAN training") — the sliced Wasserstein distance on
 //! Laplacian-pyramid patches (ProGAN, Karras et al. 2018, appendix D; `photomat_generator::swd`)
 //! between `count` relit samples of the model in RUN and `count` real crops of DATASET.
@@ -14,6 +15,10 @@
 //! command also reports whether M follows the light ([`photomat_data::light_following`]):
 //! the highlight detector's distance to the conditioned highlight on M's images and on real
 //! patches, in % of the width.
+//!
+//! With `--discriminator` (RUN must be a `photomat train-gan` run folder, which holds D) it also
+//! reports what D looks at ([`photomat_data::discriminator_probe`]): D's mean logit on reals,
+//! reals under other lights, blurred reals and fakes.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -21,6 +26,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use candle_core::Device;
+use photomat_data::discriminator_probe::{BLUR_RADII, DiscriminatorProbe, probe_discriminator};
 use photomat_data::highlight::DetectorKind;
 use photomat_data::light_following::{LightFollowing, light_following};
 use photomat_data::source::DatasetSource;
@@ -63,6 +69,13 @@ pub struct Args {
     #[arg(long, value_name = "N",
           value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub sample_size: Option<u32>,
+
+    /// Also report what the run's discriminator looks at: its mean logit on reals, on reals
+    /// under other samples' lights, on blurred reals and on fakes (RUN must be a `photomat
+    /// train-gan` run folder: train.json + train_state.safetensors). A D that scores blurred
+    /// reals like reals gives G no reason to make texture.
+    #[arg(long)]
+    pub discriminator: bool,
 
     /// Print the result as JSON instead of a table.
     #[arg(long)]
@@ -128,8 +141,27 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             )
         }
     };
+    let probe = args
+        .discriminator
+        .then(|| probe_discriminator(&args.gan, Some(&args.data), count, args.seed))
+        .transpose()
+        .with_context(|| {
+            format!(
+                "cannot probe the discriminator of the run '{}' (--discriminator needs a \
+                 `photomat train-gan` run folder)",
+                args.gan.display()
+            )
+        })?;
     let seconds = start.elapsed().as_secs_f64();
-    print_report(args, side, &report, following.as_ref(), seconds, out)
+    print_report(
+        args,
+        side,
+        &report,
+        following.as_ref(),
+        probe.as_ref(),
+        seconds,
+        out,
+    )
 }
 
 /// The measurement as JSON (`--json`) or as a table.
@@ -138,6 +170,7 @@ fn print_report(
     side: usize,
     report: &SwdReport,
     following: Option<&LightFollowing>,
+    probe: Option<&DiscriminatorProbe>,
     seconds: f64,
     out: &mut dyn Write,
 ) -> anyhow::Result<()> {
@@ -158,6 +191,7 @@ fn print_report(
             "levels": levels,
             "mean_x1e3": report.mean,
             "light_following_pct_of_width": following,
+            "discriminator": probe,
             "seconds": seconds,
         });
         writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
@@ -211,6 +245,31 @@ fn print_report(
             "(M {s}²: whole-photo samples, highlights uniform over the central half, where the \
              detector's own error is below 1 %; centre: always guessing the centre there)",
             s = f.photo_size
+        )?;
+    }
+    if let Some(p) = probe {
+        writeln!(
+            out,
+            "what D looks at (step {}, mean logit over {} images each; higher: more real):",
+            p.step, p.count
+        )?;
+        let [r1, r3] = BLUR_RADII.map(|r| 2 * r + 1);
+        for (name, value) in [
+            ("reals".to_string(), p.reals),
+            ("reals, other lights".to_string(), p.reals_other_lights),
+            (format!("reals blurred {r1}×{r1}"), p.reals_blurred[0]),
+            (format!("reals blurred {r3}×{r3}"), p.reals_blurred[1]),
+            ("fakes".to_string(), p.fakes),
+            ("fakes, other lights".to_string(), p.fakes_other_lights),
+        ] {
+            writeln!(out, "{name:>22}  {value:>+8.3}")?;
+        }
+        writeln!(
+            out,
+            "texture gap (reals − blurred reals) {:+.3}, light gap (reals − other lights) {:+.3}: \
+             a gap near 0 is something D does not look at, and G will not learn",
+            p.texture_gap(),
+            p.light_gap()
         )?;
     }
     writeln!(out, "measured in {seconds:.1} s")?;
