@@ -282,11 +282,12 @@ fn eval_gan_discriminator_probe_reads_the_runs_d() {
     let run = dir.path().join("run");
     let flags: Vec<&str> = TINY.iter().copied().chain(["--steps", "2"]).collect();
     train(Some(&data), &run, &flags).unwrap();
-    let probe = |seed: &str| -> serde_json::Value {
-        let printed = photomat(&[
+    // `eval-gan --discriminator` on `gan` with `seed`, as JSON or as the table.
+    let eval = |gan: &Path, seed: &str, json: bool| {
+        let mut args = vec![
             "eval-gan",
             "--gan",
-            path_str(&run),
+            path_str(gan),
             "--data",
             &data,
             "--count",
@@ -294,9 +295,14 @@ fn eval_gan_discriminator_probe_reads_the_runs_d() {
             "--seed",
             seed,
             "--discriminator",
-            "--json",
-        ])
-        .unwrap();
+        ];
+        if json {
+            args.push("--json");
+        }
+        photomat(&args)
+    };
+    let probe = |seed: &str| -> serde_json::Value {
+        let printed = eval(&run, seed, true).unwrap();
         serde_json::from_str::<serde_json::Value>(&printed).unwrap()["discriminator"].clone()
     };
     let p = probe("1");
@@ -321,19 +327,7 @@ fn eval_gan_discriminator_probe_reads_the_runs_d() {
     assert_eq!(probe("1"), p);
     assert_ne!(probe("2")["reals"], p["reals"]);
 
-    let table = photomat(&[
-        "eval-gan",
-        "--gan",
-        path_str(&run),
-        "--data",
-        &data,
-        "--count",
-        "4",
-        "--seed",
-        "1",
-        "--discriminator",
-    ])
-    .unwrap();
+    let table = eval(&run, "1", false).unwrap();
     assert!(table.contains("what D looks at (step 2"), "{table}");
     assert!(table.contains("texture gap"), "{table}");
 
@@ -343,15 +337,6 @@ fn eval_gan_discriminator_probe_reads_the_runs_d() {
     for f in ["gan.json", "gan.safetensors"] {
         std::fs::copy(run.join(f), gan_only.join(f)).unwrap();
     }
-    let err = photomat_error(&[
-        "eval-gan",
-        "--gan",
-        path_str(&gan_only),
-        "--data",
-        &data,
-        "--count",
-        "4",
-        "--discriminator",
-    ]);
+    let err = format!("{:#}", eval(&gan_only, "1", false).unwrap_err());
     assert!(err.contains("train-gan` run folder"), "{err}");
 }
