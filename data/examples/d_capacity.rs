@@ -106,9 +106,11 @@ fn main() -> anyhow::Result<()> {
         let texture = (softplus(&real_logits.neg()?)?.mean_all()?
             + softplus(&d.forward(&blurred, &reals.omega)?)?.mean_all()?)?;
         let loss = match light_task {
-            true => (texture
-                + softplus(&real_logits.neg()?)?.mean_all()?
-                + softplus(&d.forward(&images, &omega2)?)?.mean_all()?)?,
+            true => {
+                (texture
+                    + softplus(&real_logits.neg()?)?.mean_all()?
+                    + softplus(&d.forward(&images, &omega2)?)?.mean_all()?)?
+            }
             false => texture,
         };
         adam.step(&loss.backward()?)?;

@@ -143,6 +143,9 @@ pub mod limits {
     pub const MAX_LOCAL_DIM: usize = 1024;
     /// Most 1×1 layers of a spatial G's local input (the default: 2).
     pub const MAX_LOCAL_LAYERS: usize = 16;
+    /// Largest gain of D's input sharpening (9, ×10 detail, is what was measured; beyond
+    /// ×100 the detail's rounding noise would be amplified past the signal).
+    pub const MAX_D_INPUT_SHARPEN: f64 = 100.0;
 }
 
 /// Default side of a spatial G's sampled materials, in texels: 512², the smallest texture size
@@ -206,6 +209,17 @@ pub struct GeneratorConfig {
         skip_serializing_if = "is_noise_default"
     )]
     pub noise_inputs: bool,
+    /// Gain k of D's input sharpening ([`discriminator`], "Input sharpening"): D reads
+    /// `x + k·(x − box₃ₓ₃ x)` instead of the image x, its detail amplified k + 1 times, so that
+    /// texture whose amplitude is small next to the colour and the highlight weighs in its
+    /// first layer. 0 (the default, and older files, where it is absent) is StyleGAN2's D.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub d_input_sharpen: f64,
+}
+
+/// Whether a gain is 0 (then `gan.json` omits it).
+fn is_zero(v: &f64) -> bool {
+    *v == 0.0
 }
 
 /// Serde default of [`GeneratorConfig::noise_inputs`]: on, as before the option existed.
@@ -237,6 +251,7 @@ impl Default for GeneratorConfig {
             mbstd_channels: 1,
             spatial: None,
             noise_inputs: true,
+            d_input_sharpen: 0.0,
         }
     }
 }
@@ -305,6 +320,13 @@ impl GeneratorConfig {
             if v > max {
                 bail!("{name} {v} exceeds the limit of {max}");
             }
+        }
+        if !(0.0..=limits::MAX_D_INPUT_SHARPEN).contains(&self.d_input_sharpen) {
+            bail!(
+                "d_input_sharpen {} must be in 0 … {}",
+                self.d_input_sharpen,
+                limits::MAX_D_INPUT_SHARPEN
+            );
         }
         for (name, v) in [
             ("mapping_lr_multiplier", self.mapping_lr_multiplier),

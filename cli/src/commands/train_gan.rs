@@ -134,6 +134,12 @@ pub struct Args {
     #[arg(long)]
     pub no_noise: bool,
 
+    /// Gain k of the discriminator's input sharpening: D reads x + k·(x − 3×3 mean of x), the
+    /// images' detail amplified k + 1 times, so that it sees texture that is faint next to
+    /// the colour and the highlight [default: 0, StyleGAN2's D; 9 is what was measured].
+    #[arg(long, value_name = "K")]
+    pub d_sharpen: Option<f64>,
+
     /// Channels of the spatial generator's local latents (one vector per size/4 cell)
     /// [default: 32].
     #[arg(long, value_name = "N", requires = "spatial",
@@ -211,6 +217,7 @@ impl Args {
             light_mismatch: self.light_mismatch,
             relight_lobes: self.relight_lobes.clone().map(|l| l.0),
             no_noise: self.no_noise,
+            d_sharpen: self.d_sharpen,
             checkpoint_every: self.checkpoint_every,
             sample_every: self.sample_every,
             swd_every: self.swd_every,

@@ -90,6 +90,8 @@ pub struct GanSettings {
     /// Leave out the per-pixel noise inputs ([`GeneratorConfig::noise_inputs`]; `false`: not
     /// asked for).
     pub no_noise: bool,
+    /// Gain of D's input sharpening ([`GeneratorConfig::d_input_sharpen`]).
+    pub d_sharpen: Option<f64>,
     /// Steps between checkpoints ([`Cadence::checkpoint_every`]).
     pub checkpoint_every: Option<u64>,
     /// Steps between sample grids ([`Cadence::sample_every`]).
@@ -124,7 +126,13 @@ type FixedField = (
 );
 
 /// Every setting fixed at the start of a run, with its command-line flag.
-pub const RESUME_FIXED: [FixedField; 15] = [
+pub const RESUME_FIXED: [FixedField; 16] = [
+    (
+        "--d-sharpen",
+        "generator.d_input_sharpen",
+        |s| s.d_sharpen.map(|v| v.to_string()),
+        |c| c.generator.d_input_sharpen.to_string(),
+    ),
     (
         "--no-noise",
         "generator.noise_inputs",
@@ -585,6 +593,7 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
         // A spatial G is translation-equivariant only with wrap-around padding.
         tileable: settings.tileable || settings.spatial,
         noise_inputs: !settings.no_noise,
+        d_input_sharpen: settings.d_sharpen.unwrap_or(defaults.d_input_sharpen),
         spatial,
         latent_dim: settings.latent_dim.unwrap_or(defaults.latent_dim),
         relight_lr_multiplier: settings
