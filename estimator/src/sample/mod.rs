@@ -58,7 +58,7 @@ use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::map_files::{SaveOptions, folder_bytes, save_maps};
 use photomat_core::previews::map_previews;
 use photomat_core::sheet::{grid, resize_square};
-use photomat_core::simplify::simplify;
+use photomat_core::simplify::{SimplifyRecord, simplify};
 use photomat_core::{Brdf, FlashGeometry, FolderLock, LightSet, MaterialMaps, render_with};
 use photomat_generator::GanModel;
 use photomat_generator::model_files::GAN_MANIFEST_FILE;
@@ -485,32 +485,19 @@ impl Job<'_> {
             None => (maps, analytic, l1, None),
             Some(tolerance) => {
                 let stage = Instant::now();
-                let gamma = photomat_core::render::DISPLAY_GAMMA;
-                let linear_neural = neural.powf(gamma)?;
-                let simplified = simplify(brdf.as_ref(), &maps, tolerance, |m| {
-                    let analytic = analytic_renders(brdf, m, self.geometry)?;
-                    let linear = analytic.powf(gamma)?;
-                    Ok::<_, anyhow::Error>(vec![
-                        mean(&per_light_l1(&linear, &linear_neural)?),
-                        mean(&per_light_l1(&analytic, &neural)?),
-                    ])
-                })
-                .with_context(|| format!("seed {seed}: cannot simplify the maps"))?;
-                let bytes_before = folder_bytes(brdf.as_ref(), &maps, &save_options)?;
-                save_options.compact = true;
-                let bytes_after = folder_bytes(brdf.as_ref(), &simplified.maps, &save_options)?;
-                let record = simplified.record(&SIMPLIFY_METRICS, bytes_before, bytes_after);
-                save_options.simplification = Some(serde_json::to_value(&record)?);
-                let (maps, analytic, l1) = match simplified.steps.is_empty() {
-                    true => (maps, analytic, l1),
-                    false => {
-                        let analytic = analytic_renders(brdf, &simplified.maps, self.geometry)?;
-                        let l1 = per_light_l1(&analytic, &neural)?;
-                        (simplified.maps, analytic, l1)
-                    }
-                };
+                let simplified = self
+                    .simplified(
+                        brdf,
+                        maps,
+                        analytic,
+                        l1,
+                        &neural,
+                        tolerance,
+                        &mut save_options,
+                    )
+                    .with_context(|| format!("seed {seed}: cannot simplify the maps"))?;
                 timings.simplify += stage.elapsed().as_secs_f64();
-                (maps, analytic, l1, Some(record))
+                simplified
             }
         };
 
@@ -607,6 +594,46 @@ impl Job<'_> {
             },
             sheet_row,
         })
+    }
+}
+
+impl Job<'_> {
+    /// `--simplify`: the maps simplified within `tolerance` of both [`SIMPLIFY_METRICS`]
+    /// against M's renders `neural`, their renders and per-light L1 (the ones given when no
+    /// map could be simplified), and the record, which `save_options` then carries with
+    /// `compact` set.
+    #[allow(clippy::too_many_arguments)]
+    fn simplified(
+        &self,
+        brdf: &Brdf,
+        maps: MaterialMaps,
+        analytic: Tensor,
+        l1: Vec<f64>,
+        neural: &Tensor,
+        tolerance: f64,
+        save_options: &mut SaveOptions,
+    ) -> anyhow::Result<(MaterialMaps, Tensor, Vec<f64>, Option<SimplifyRecord>)> {
+        let gamma = photomat_core::render::DISPLAY_GAMMA;
+        let linear_neural = neural.powf(gamma)?;
+        let simplified = simplify(brdf.as_ref(), &maps, tolerance, |m| {
+            let analytic = analytic_renders(brdf, m, self.geometry)?;
+            let linear = analytic.powf(gamma)?;
+            Ok::<_, anyhow::Error>(vec![
+                mean(&per_light_l1(&linear, &linear_neural)?),
+                mean(&per_light_l1(&analytic, neural)?),
+            ])
+        })?;
+        let bytes_before = folder_bytes(brdf.as_ref(), &maps, save_options)?;
+        save_options.compact = true;
+        let bytes_after = folder_bytes(brdf.as_ref(), &simplified.maps, save_options)?;
+        let record = simplified.record(&SIMPLIFY_METRICS, bytes_before, bytes_after);
+        save_options.simplification = Some(serde_json::to_value(&record)?);
+        if simplified.steps.is_empty() {
+            return Ok((maps, analytic, l1, Some(record)));
+        }
+        let analytic = analytic_renders(brdf, &simplified.maps, self.geometry)?;
+        let l1 = per_light_l1(&analytic, neural)?;
+        Ok((simplified.maps, analytic, l1, Some(record)))
     }
 }
 
