@@ -22,16 +22,20 @@
 //! what a single light cannot separate (e.g. roughness far from the highlight) smooth rather
 //! than noisy. Adam ([`photomat_train::Adam`]) steps all of them.
 //!
+//! The camera's field of view is an input ([`CaptureOptions::fov_degrees`]): it sets how wide
+//! the photographed square is at the flash's height 1 ([`square_side`];
+//! docs/conventions.md, "A photo's field of view"), hence the texel size of the maps and the
+//! angles under which each texel saw the flash. [`relight`] renders the fitted maps under
+//! new flash positions ([`new_flash_positions`]), which a single photo never showed.
+//!
 //! Not yet: the generator's prior (inverting M∘G, then decoding with E, before this
-//! refinement), a `--fov` for tilted or perspective photos, and fitted vignetting and
-//! ambient terms.
+//! refinement), camera tilt, and fitted vignetting and ambient terms.
 
 use std::path::Path;
 use std::time::Instant;
 
 use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor, Var};
-use photomat_core::flash::PHOTO_SIDE;
 use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
 use photomat_core::render::render_radiance_with;
@@ -45,6 +49,38 @@ use serde::Serialize;
 /// Smallest and largest side of a capture: below 16 texels there is no highlight to fit,
 /// above 2048 one step's render and gradients exceed a few GB.
 pub const SIZE_RANGE: (usize, usize) = (16, 2048);
+
+/// Default field of view across a photo's longer side, in degrees: a phone's main camera
+/// (26 mm equivalent focal length on a 4:3 sensor: 2·atan(17.3 / 26) ≈ 67°).
+pub const DEFAULT_FOV_DEGREES: f64 = 67.0;
+
+/// The field of view under which a square photo spans the training data's
+/// [`photomat_core::flash::PHOTO_SIDE`] = 2 at flash height 1: 2·atan(1) = 90°.
+pub const TRAINING_FOV_DEGREES: f64 = 90.0;
+
+/// Fields of view a capture accepts, in degrees: below 5° the photo is a telescope's, above
+/// 150° a fisheye's, which a pinhole straight down does not describe.
+pub const FOV_RANGE: (f64, f64) = (5.0, 150.0);
+
+/// Side, in world units, of the centred square cut from a `width × height` photo taken
+/// straight down with a field of view of `fov_degrees` across its longer side, with the
+/// camera (and flash) at height 1: `2 · tan(fov / 2) · min(w, h) / max(w, h)`.
+pub fn square_side(fov_degrees: f64, width: usize, height: usize) -> f64 {
+    let (short, long) = (width.min(height) as f64, width.max(height) as f64);
+    2.0 * (fov_degrees.to_radians() / 2.0).tan() * short / long
+}
+
+/// Eight flash positions the photo did not show, for renders of the fitted maps: a ring at a
+/// quarter of the square's side around its centre, every 45° (the flash at height 1, so the
+/// highlight moves across the central half of the square).
+pub fn new_flash_positions(side: f64) -> Vec<Highlight> {
+    (0..8)
+        .map(|k| {
+            let angle = k as f64 * std::f64::consts::FRAC_PI_4;
+            Highlight::new(0.25 * side * angle.cos(), 0.25 * side * angle.sin())
+        })
+        .collect()
+}
 
 /// How a photo is fitted.
 #[derive(Debug, Clone, PartialEq)]
@@ -62,6 +98,9 @@ pub struct CaptureOptions {
     /// The highlight in continuous pixel `(row, col)` of the square image, instead of
     /// detecting it.
     pub highlight: Option<(f64, f64)>,
+    /// Field of view across the photo's longer side, in degrees ([`DEFAULT_FOV_DEGREES`]);
+    /// with the camera straight down it sets the square's side ([`square_side`]).
+    pub fov_degrees: f64,
 }
 
 impl Default for CaptureOptions {
@@ -72,6 +111,7 @@ impl Default for CaptureOptions {
             lr: 0.05,
             smoothness: 0.002,
             highlight: None,
+            fov_degrees: DEFAULT_FOV_DEGREES,
         }
     }
 }
@@ -91,6 +131,10 @@ pub struct Capture {
     pub highlight: HighlightUsed,
     /// The fitted exposure gain.
     pub gain: f64,
+    /// Side of the photographed square in world units, at flash height 1 ([`square_side`]).
+    pub side: f64,
+    /// The field of view it was computed from, in degrees.
+    pub fov_degrees: f64,
     /// Loss after every step.
     pub losses: Vec<f64>,
     /// Wall seconds of the fit.
@@ -120,6 +164,13 @@ pub fn capture(
     let (lo, hi) = SIZE_RANGE;
     if !(lo..=hi).contains(&options.size) {
         bail!("capture size {} is outside {lo} … {hi}", options.size);
+    }
+    let (fov_lo, fov_hi) = FOV_RANGE;
+    if !(fov_lo..=fov_hi).contains(&options.fov_degrees) {
+        bail!(
+            "field of view {}° is outside {fov_lo} … {fov_hi}°",
+            options.fov_degrees
+        );
     }
     let n = options.size;
     let framing = Framing {
@@ -151,10 +202,12 @@ pub fn capture(
     };
     let device = Device::Cpu;
     let photo = prepared.image.to_tensor(&device)?;
+    let [width, height] = prepared.source_size;
+    let side = square_side(options.fov_degrees, width, height);
     let (row, col) = highlight.pixel;
-    let light = Highlight::from_pixel_on(row, col, n, PHOTO_SIDE);
-    let geometry = FlashGeometry::with_side(&[light], n, PHOTO_SIDE, DType::F32, &device)?;
-    let texel = PHOTO_SIDE / n as f64;
+    let light = Highlight::from_pixel_on(row, col, n, side);
+    let geometry = FlashGeometry::with_side(&[light], n, side, DType::F32, &device)?;
+    let texel = side / n as f64;
 
     let raw = Var::zeros((1, brdf.channels(), n, n), DType::F32, &device)?;
     let log_gain = Var::zeros(1, DType::F32, &device)?;
@@ -206,9 +259,20 @@ pub fn capture(
         render: render.detach(),
         highlight,
         gain,
+        side,
+        fov_degrees: options.fov_degrees,
         losses,
         seconds: start.elapsed().as_secs_f64(),
     })
+}
+
+/// The fitted maps rendered under `lights` (flash positions on the captured square, e.g.
+/// [`new_flash_positions`]), with the fitted gain, as display values: (L, 3, N, N).
+pub fn relight(capture: &Capture, lights: &[Highlight]) -> anyhow::Result<Tensor> {
+    let (_, _, n, _) = capture.photo.dims4()?;
+    let geometry = FlashGeometry::with_side(lights, n, capture.side, DType::F32, &Device::Cpu)?;
+    let radiance = render_radiance_with(capture.brdf.as_ref(), &capture.maps, &geometry)?;
+    Ok(encode_display(&(radiance * capture.gain)?)?)
 }
 
 /// Mean absolute difference of neighbouring texels (wrap-around) of a (B, C, H, W) tensor.
@@ -223,6 +287,8 @@ fn total_variation(x: &Tensor) -> candle_core::Result<Tensor> {
 struct CaptureRecord<'a> {
     brdf: String,
     size: usize,
+    fov_degrees: f64,
+    side: f64,
     texel_size: f64,
     highlight: &'a HighlightUsed,
     gain: f64,
@@ -234,7 +300,8 @@ struct CaptureRecord<'a> {
 }
 
 /// Writes `out/material/` (the maps: PNG + EXR + material.json), `out/sheet.png` (photo |
-/// re-render | ×4 absolute error) and `out/capture.json`.
+/// re-render | ×4 absolute error), `out/relit.png` (the maps under the eight
+/// [`new_flash_positions`], in a row) and `out/capture.json`.
 pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create '{}'", out.display()))?;
     save_maps(
@@ -255,11 +322,22 @@ pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
     .map(|t| PlanarImage::from_tensor(&t.squeeze(0)?))
     .collect::<photomat_core::Result<Vec<_>>>()?;
     write_png(&out.join("sheet.png"), &grid(&[row], 0.0)?, PngBits::Eight)?;
+    let relit = relight(capture, &new_flash_positions(capture.side))?.clamp(0.0, 1.0)?;
+    let relit = (0..relit.dim(0)?)
+        .map(|i| PlanarImage::from_tensor(&relit.get(i)?))
+        .collect::<photomat_core::Result<Vec<_>>>()?;
+    write_png(
+        &out.join("relit.png"),
+        &grid(&[relit], 0.0)?,
+        PngBits::Eight,
+    )?;
     let (_, _, n, _) = capture.photo.dims4()?;
     let record = CaptureRecord {
         brdf: capture.brdf.name(),
         size: n,
-        texel_size: PHOTO_SIDE / n as f64,
+        fov_degrees: capture.fov_degrees,
+        side: capture.side,
+        texel_size: capture.side / n as f64,
         highlight: &capture.highlight,
         gain: capture.gain,
         steps: capture.losses.len(),

@@ -1,21 +1,24 @@
 //! `photomat_capture::capture` on a photo rendered from known maps under a known flash: the
 //! loss falls, the re-render matches, the highlight is found, the output folder loads back,
-//! and bad inputs fail naming the file.
+//! the field of view sets the geometry (the right one relights the fit closer to the truth
+//! under new flash positions than a wrong one), and bad inputs fail naming the file.
 
 use candle_core::{DType, Device, Tensor};
 use photomat_brdfs as _; // link the built-in models
-use photomat_capture::{CaptureOptions, capture, write_capture};
+use photomat_capture::{
+    CaptureOptions, TRAINING_FOV_DEGREES, capture, new_flash_positions, relight, square_side,
+    write_capture,
+};
 use photomat_core::flash::PHOTO_SIDE;
-use photomat_core::image_io::{PlanarImage, PngBits, encode_png};
+use photomat_core::image_io::{PlanarImage, PngBits, encode_png, png_header};
 use photomat_core::map_files::load_maps;
 use photomat_core::render::render_radiance_with;
 use photomat_core::{FlashGeometry, Highlight, MaterialMaps, encode_display, lookup};
 
 const SIZE: usize = 64;
 
-/// A ggx material with checked albedos and rougher stripes, photographed with the flash
-/// above pixel (28, 36): PNG bytes, and the highlight.
-fn photo() -> (Vec<u8>, (f64, f64)) {
+/// A ggx material with checked albedos and rougher stripes: its maps.
+fn truth() -> MaterialMaps {
     let brdf = lookup("ggx").unwrap();
     let device = Device::Cpu;
     let mut maps = MaterialMaps::defaults(brdf.params(), 1, SIZE, DType::F32, &device).unwrap();
@@ -39,19 +42,32 @@ fn photo() -> (Vec<u8>, (f64, f64)) {
         "roughness",
         Tensor::from_vec(rough, (1, 1, SIZE, SIZE), &device).unwrap(),
     );
+    maps
+}
+
+/// [`truth`]'s maps over a square of `side` at flash height 1, rendered ×2 under `lights`:
+/// (L, 3, SIZE, SIZE) display values.
+fn render_truth(side: f64, lights: &[Highlight]) -> Tensor {
+    let brdf = lookup("ggx").unwrap();
+    let geometry = FlashGeometry::with_side(lights, SIZE, side, DType::F32, &Device::Cpu).unwrap();
+    let maps = truth().with_texel_size(Some(side / SIZE as f64));
+    encode_display(&(render_radiance_with(brdf.as_ref(), &maps, &geometry).unwrap() * 2.0).unwrap())
+        .unwrap()
+}
+
+/// [`truth`] photographed square with the flash above pixel (28, 36), the square of `side`:
+/// PNG bytes, and the highlight.
+fn photo_of_side(side: f64) -> (Vec<u8>, (f64, f64)) {
     let pixel = (28.0, 36.0);
-    let light = Highlight::from_pixel_on(pixel.0, pixel.1, SIZE, PHOTO_SIDE);
-    let geometry =
-        FlashGeometry::with_side(&[light], SIZE, PHOTO_SIDE, DType::F32, &device).unwrap();
-    let maps = maps.with_texel_size(Some(PHOTO_SIDE / SIZE as f64));
-    let image = encode_display(
-        &(render_radiance_with(brdf.as_ref(), &maps, &geometry).unwrap() * 2.0).unwrap(),
-    )
-    .unwrap()
-    .squeeze(0)
-    .unwrap();
+    let light = Highlight::from_pixel_on(pixel.0, pixel.1, SIZE, side);
+    let image = render_truth(side, &[light]).squeeze(0).unwrap();
     let png = encode_png(&PlanarImage::from_tensor(&image).unwrap(), PngBits::Eight).unwrap();
     (png, pixel)
+}
+
+/// The photo in the training data's geometry (a square of side 2, a 90° field of view).
+fn photo() -> (Vec<u8>, (f64, f64)) {
+    photo_of_side(PHOTO_SIDE)
 }
 
 #[test]
@@ -61,9 +77,11 @@ fn capture_fits_a_rendered_photo_and_writes_a_loadable_folder() {
     let options = CaptureOptions {
         size: SIZE,
         steps: 200,
+        fov_degrees: TRAINING_FOV_DEGREES,
         ..CaptureOptions::default()
     };
     let result = capture(&png, "rendered.png", &brdf, &options, &mut |_, _| {}).unwrap();
+    assert!((result.side - PHOTO_SIDE).abs() < 1e-12, "{}", result.side);
     // The detector finds the flash within 2 % of the width.
     let (row, col) = result.highlight.pixel;
     assert!(
@@ -93,7 +111,71 @@ fn capture_fits_a_rendered_photo_and_writes_a_loadable_folder() {
     let record: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("capture.json")).unwrap()).unwrap();
     assert_eq!(record["steps"], 200);
+    assert_eq!(record["fov_degrees"], TRAINING_FOV_DEGREES);
+    // tan 45° is 1 within an ulp.
+    let texel = PHOTO_SIDE / SIZE as f64;
+    assert!((record["texel_size"].as_f64().unwrap() - texel).abs() < 1e-12);
+    assert!((loaded.manifest.texel_size.unwrap() - texel).abs() < 1e-12);
     assert!(dir.path().join("sheet.png").is_file());
+    // relit.png: one row of eight renders, laid out as the sheet grid lays out eight tiles.
+    let tiles = vec![PlanarImage::filled(3, SIZE, SIZE, 0.0); 8];
+    let expected = photomat_core::sheet::grid(&[tiles], 0.0).unwrap();
+    let (_, height, width) = png_header(&dir.path().join("relit.png")).unwrap();
+    assert_eq!((height, width), (expected.height, expected.width));
+}
+
+#[test]
+fn square_side_follows_the_pinhole() {
+    // 90° across a square photo: the training data's side 2 at height 1.
+    assert!((square_side(90.0, 512, 512) - 2.0).abs() < 1e-12);
+    // A 4:3 photo is cropped to its short side: ¾ of the long side's width.
+    assert!((square_side(90.0, 4000, 3000) - 1.5).abs() < 1e-12);
+    assert!((square_side(90.0, 3000, 4000) - 1.5).abs() < 1e-12);
+    // 60°: 2·tan 30° = 2/√3.
+    assert!((square_side(60.0, 100, 100) - 2.0 / 3f64.sqrt()).abs() < 1e-12);
+    // The new flash positions ring the centre at a quarter of the side.
+    for light in new_flash_positions(1.2) {
+        assert!((light.x.hypot(light.y) - 0.3).abs() < 1e-12, "{light:?}");
+    }
+}
+
+#[test]
+fn the_right_field_of_view_relights_closer_to_the_truth() {
+    // A photo taken with a 60° field of view: a square of 2·tan 30° ≈ 1.155 at height 1, so
+    // the flash is farther, relative to the square, than in the training geometry (side 2)
+    // and the texels see it closer to the normal. Fitting it with the right geometry must predict the material
+    // under new flash positions better than fitting it as if it spanned side 2.
+    let fov = 60.0;
+    let side = square_side(fov, SIZE, SIZE);
+    let (png, _) = photo_of_side(side);
+    let brdf = lookup("ggx").unwrap();
+    let held_out = |fov_degrees: f64| {
+        let options = CaptureOptions {
+            size: SIZE,
+            steps: 150,
+            fov_degrees,
+            ..CaptureOptions::default()
+        };
+        let fit = capture(&png, "fov60.png", &brdf, &options, &mut |_, _| {}).unwrap();
+        assert!((fit.side - square_side(fov_degrees, SIZE, SIZE)).abs() < 1e-12);
+        // The same flash positions relative to each square (a quarter of its side from the
+        // centre), so the renders are compared at the same pixels under the truth's geometry.
+        let truth = render_truth(side, &new_flash_positions(side));
+        let relit = relight(&fit, &new_flash_positions(fit.side)).unwrap();
+        (relit - truth)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .mean_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap()
+    };
+    let (right, wrong) = (held_out(fov), held_out(TRAINING_FOV_DEGREES));
+    assert!(
+        right < 0.8 * wrong,
+        "held-out L1 with the right fov {right}, with 90° {wrong}"
+    );
 }
 
 #[test]

@@ -1,7 +1,7 @@
 //! The `photomat` command line through `photomat_cli::run_with_output`: `brdfs` lists the
 //! built-ins with their channel counts, `render` writes the renderer's image and orbit contact
 //! sheets, `brdf-eval` matches Lambert's closed form and its gradients match finite
-//! differences of its own values.
+//! differences of its own values, `capture --fov` sets the captured square's side.
 
 use photomat_tests as _;
 
@@ -547,4 +547,76 @@ fn map_stats_measures_the_normal_spread_of_a_derived_normal() {
     let measured = spread["normal_angle_rms_deg"].as_f64().unwrap();
     assert!((measured - rms).abs() < 1e-3, "{measured}° vs {rms}°");
     assert!(spread["normal_mean_tilt_deg"].as_f64().unwrap() < 1e-3);
+}
+
+#[test]
+fn cli_capture_takes_the_field_of_view_and_refuses_one_out_of_range() {
+    // A 48² render of a constant ggx material with the flash above the centre, in the training
+    // geometry (side 2).
+    let brdf = model("ggx");
+    let device = Device::Cpu;
+    let size = 48;
+    let maps = MaterialMaps::defaults(brdf.params(), 1, size, DType::F32, &device).unwrap();
+    let geometry = photomat_core::FlashGeometry::with_side(
+        &[Highlight::new(0.0, 0.0)],
+        size,
+        2.0,
+        DType::F32,
+        &device,
+    )
+    .unwrap();
+    let radiance = render::render_radiance_with(brdf.as_ref(), &maps, &geometry).unwrap();
+    let image = photomat_core::encode_display(&radiance)
+        .unwrap()
+        .squeeze(0)
+        .unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let photo = dir.path().join("photo.png");
+    photomat_core::image_io::write_png(
+        &photo,
+        &PlanarImage::from_tensor(&image).unwrap(),
+        PngBits::Eight,
+    )
+    .unwrap();
+    let out = dir.path().join("captured");
+    let printed = photomat(&[
+        "capture",
+        path_str(&photo),
+        "--brdf",
+        "ggx",
+        "--out",
+        path_str(&out),
+        "--size",
+        "32",
+        "--steps",
+        "3",
+        "--fov",
+        "60",
+    ])
+    .unwrap();
+    assert!(printed.contains("from a 60° field of view"), "{printed}");
+    let record: Value =
+        serde_json::from_slice(&std::fs::read(out.join("capture.json")).unwrap()).unwrap();
+    let side = 2.0 * (30f64).to_radians().tan();
+    assert!(
+        (record["side"].as_f64().unwrap() - side).abs() < 1e-9,
+        "{record}"
+    );
+    assert!(
+        (record["texel_size"].as_f64().unwrap() - side / 32.0).abs() < 1e-9,
+        "{record}"
+    );
+    assert!(out.join("relit.png").is_file());
+
+    let err = photomat_error(&[
+        "capture",
+        path_str(&photo),
+        "--brdf",
+        "ggx",
+        "--out",
+        path_str(&dir.path().join("other")),
+        "--fov",
+        "200",
+    ]);
+    assert!(err.contains("'200'") && err.contains("5 … 150"), "{err}");
 }

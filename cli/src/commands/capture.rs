@@ -1,14 +1,15 @@
-//! `photomat capture PHOTO --brdf SPEC --out DIR [--size 256] [--steps 400] [--highlight ROW,COL]`:
-//! one phone flash photo → maps of a named BRDF model. The fit is the library's
-//! `photomat_capture::capture` (docs/capture.md); this command reads the file, locks DIR, shows
-//! progress and writes DIR/material/ (loadable by every command), DIR/sheet.png (photo |
-//! re-render | ×4 error) and DIR/capture.json (highlight, gain, losses, timings).
+//! `photomat capture PHOTO --brdf SPEC --out DIR [--size 256] [--steps 400] [--fov 67]
+//! [--highlight ROW,COL]`: one phone flash photo → maps of a named BRDF model. The fit is the
+//! library's `photomat_capture::capture` (docs/capture.md); this command reads the file, locks
+//! DIR, shows progress and writes DIR/material/ (loadable by every command), DIR/sheet.png
+//! (photo | re-render | ×4 error), DIR/relit.png (the maps under eight new flash positions) and
+//! DIR/capture.json (geometry, highlight, gain, losses, timings).
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use photomat_capture::{CaptureOptions, capture, write_capture};
+use photomat_capture::{CaptureOptions, FOV_RANGE, capture, write_capture};
 use photomat_core::{FolderLock, lookup};
 
 use crate::common::steps_bar;
@@ -40,6 +41,24 @@ pub struct Args {
     /// detecting it.
     #[arg(long, value_name = "ROW,COL", value_parser = parse_pixel)]
     pub highlight: Option<(f64, f64)>,
+
+    /// The camera's field of view across the photo's longer side, in degrees (5 … 150), the
+    /// camera looking straight down with the flash beside the lens. It sets the photographed
+    /// square's size relative to the flash's distance [default: 67, a phone's main camera at
+    /// 26 mm equivalent; 90 is the geometry of the training data, docs/conventions.md].
+    #[arg(long, value_name = "DEG", value_parser = parse_fov)]
+    pub fov: Option<f64>,
+}
+
+/// A field of view within [`FOV_RANGE`] degrees.
+fn parse_fov(text: &str) -> Result<f64, String> {
+    let (lo, hi) = FOV_RANGE;
+    match text.trim().parse::<f64>() {
+        Ok(v) if (lo..=hi).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "'{text}' is not a field of view in {lo} … {hi} degrees"
+        )),
+    }
 }
 
 /// `ROW,COL`: two finite numbers.
@@ -63,6 +82,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         size: args.size.map_or(defaults.size, |n| n as usize),
         steps: args.steps.map_or(defaults.steps, |k| k as usize),
         highlight: args.highlight,
+        fov_degrees: args.fov.unwrap_or(defaults.fov_degrees),
         ..defaults
     };
     let _lock = FolderLock::acquire(&args.out, "photomat capture")?;
@@ -78,11 +98,14 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let (row, col) = result.highlight.pixel;
     writeln!(
         out,
-        "captured {} as {} ({}², flash above pixel ({row:.1}, {col:.1}) by {}, gain {:.3}): \
+        "captured {} as {} ({}², a square of {:.3} at flash height 1 from a {}° field of view; \
+         flash above pixel ({row:.1}, {col:.1}) by {}, gain {:.3}): \
          loss {:.4} → {:.4} in {} steps, {:.1} s",
         name,
         brdf.name(),
         options.size,
+        result.side,
+        result.fov_degrees,
         result.highlight.source,
         result.gain,
         result.losses.first().copied().unwrap_or(f64::NAN),
@@ -98,7 +121,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     writeln!(out, "  {dir}/sheet.png  photo | re-render | ×4 error")?;
     writeln!(
         out,
-        "  {dir}/capture.json  highlight, gain, losses, timings"
+        "  {dir}/relit.png  the maps under eight new flash positions"
+    )?;
+    writeln!(
+        out,
+        "  {dir}/capture.json  geometry, highlight, gain, losses, timings"
     )?;
     Ok(())
 }
