@@ -4,7 +4,9 @@
 //!
 //! [`load_vars_checked`] loads only when every variable is present with the same shape and
 //! the file holds no other tensor; otherwise nothing is modified and the error names the file
-//! and the first mismatching tensors. [`save_vars_atomic`] writes a temporary file in the
+//! and the first mismatching tensors. [`load_vars_allowing_absent`] does the same but lets the
+//! variables its caller names be absent (left as they are), for a training state saved without
+//! its optimiser ([`copy_checkpoint_where`]). [`save_vars_atomic`] writes a temporary file in the
 //! same folder and renames it over the target, so a Ctrl-C or a crash mid-save keeps the
 //! previous checkpoint intact.
 
@@ -38,10 +40,38 @@ pub fn save_vars_atomic(vars: &VarMap, path: &Path) -> Result<()> {
     write_atomic(path, &bytes)
 }
 
+/// Copies the tensors of the safetensors file `from` whose name `keep` accepts into a new
+/// file `to` (written atomically), unchanged. Returns how many were left out.
+pub fn copy_checkpoint_where(from: &Path, to: &Path, keep: impl Fn(&str) -> bool) -> Result<usize> {
+    let bytes = std::fs::read(from)
+        .map_err(|e| Error::file(from, format!("cannot read checkpoint: {e}")))?;
+    let file = safetensors::SafeTensors::deserialize(&bytes)
+        .map_err(|e| Error::file(from, format!("not a safetensors checkpoint: {e}")))?;
+    let all = file.tensors();
+    let total = all.len();
+    let kept: Vec<_> = all.into_iter().filter(|(name, _)| keep(name)).collect();
+    let left_out = total - kept.len();
+    let out = safetensors::tensor::serialize(kept, None)
+        .map_err(|e| Error::file(to, format!("cannot serialise checkpoint: {e}")))?;
+    write_atomic(to, &out)?;
+    Ok(left_out)
+}
+
 /// Loads the safetensors file `path` into the variables of `vars`, which must describe the
 /// same architecture: same names, same shapes. Stored values are converted to each
 /// variable's dtype (an f64 checkpoint loads into an f32 model).
 pub fn load_vars_checked(vars: &VarMap, path: &Path) -> Result<()> {
+    load_vars_allowing_absent(vars, path, |_| false).map(|_| ())
+}
+
+/// [`load_vars_checked`], except that a variable whose name `may_be_absent` accepts may be
+/// missing from the file: it keeps its value. Returns the names of those left as they were,
+/// sorted.
+pub fn load_vars_allowing_absent(
+    vars: &VarMap,
+    path: &Path,
+    may_be_absent: impl Fn(&str) -> bool,
+) -> Result<Vec<String>> {
     // SAFETY: the file is mapped read-only for the duration of this call; a checkpoint
     // modified concurrently by another process is outside this API's contract (as for
     // candle's own VarMap::load).
@@ -56,9 +86,11 @@ pub fn load_vars_checked(vars: &VarMap, path: &Path) -> Result<()> {
     let mut names: Vec<&String> = data.keys().collect();
     names.sort();
     let mut problems = Vec::new();
+    let mut absent = Vec::new();
     for name in &names {
         let expected = data[*name].dims();
         match stored.get(*name) {
+            None if may_be_absent(name) => absent.push((*name).clone()),
             None => problems.push(format!("tensor `{name}` {expected:?} is missing")),
             Some(shape) if shape.as_slice() != expected => problems.push(format!(
                 "tensor `{name}` has shape {shape:?} in the checkpoint, the model expects {expected:?}"
@@ -87,11 +119,11 @@ pub fn load_vars_checked(vars: &VarMap, path: &Path) -> Result<()> {
             ),
         ));
     }
-    for name in names {
+    for name in names.into_iter().filter(|n| stored.contains_key(*n)) {
         let var = &data[name];
         var.set(&file.load(name, var.device())?.to_dtype(var.dtype())?)?;
     }
-    Ok(())
+    Ok(absent)
 }
 
 #[cfg(test)]
@@ -139,6 +171,44 @@ mod tests {
             untouched.sum_all().unwrap().to_scalar::<f32>().unwrap(),
             0.0
         );
+    }
+
+    #[test]
+    fn variables_saved_apart_may_be_absent_only_where_allowed() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("w.safetensors");
+        let saved = vars_with((2, 3), 1.5);
+        VarBuilder::from_varmap(&saved, DType::F32, &Device::Cpu)
+            .get_with_hints(4, "opt.moment", Init::Const(7.0))
+            .unwrap();
+        let full = dir.path().join("full.safetensors");
+        save_vars_atomic(&saved, &full).unwrap();
+        let left_out =
+            copy_checkpoint_where(&full, &path, |name| !name.starts_with("opt.")).unwrap();
+        assert_eq!(left_out, 1);
+
+        let target = vars_with((2, 3), 0.0);
+        VarBuilder::from_varmap(&target, DType::F32, &Device::Cpu)
+            .get_with_hints(4, "opt.moment", Init::Const(0.0))
+            .unwrap();
+        // Without permission the absent tensor is an error, and nothing is loaded.
+        let err = load_vars_checked(&target, &path).unwrap_err().to_string();
+        assert!(err.contains("`opt.moment` [4] is missing"), "{err}");
+        let sum = |name: &str| {
+            target.data().lock().unwrap()[name]
+                .as_tensor()
+                .sum_all()
+                .unwrap()
+                .to_scalar::<f32>()
+                .unwrap()
+        };
+        assert_eq!(sum("layer.weight"), 0.0);
+        // With it, the rest loads and the absent one keeps its value.
+        let absent =
+            load_vars_allowing_absent(&target, &path, |name| name.starts_with("opt.")).unwrap();
+        assert_eq!(absent, vec!["opt.moment".to_string()]);
+        assert_eq!(sum("layer.weight"), 9.0);
+        assert_eq!(sum("opt.moment"), 0.0);
     }
 
     /// Checkpoints get the permissions of any file the user creates (the umask's), not the

@@ -2,7 +2,8 @@
 //! simulator + `prepare`): D learns to separate reals from fakes without a non-finite value,
 //! runs are deterministic under their seed, a resumed run is bit-identical to an uninterrupted
 //! one (path-length regularisation included), resuming another configuration names the
-//! field, and the NaN guard skips poisoned updates and stops a diverged run, whose last
+//! field, a state kept without its optimisers resumes the networks exactly with fresh Adam
+//! moments (and one with part of them is refused), and the NaN guard skips poisoned updates and stops a diverged run, whose last
 //! checkpoint stays the last good state.
 //!
 //! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
@@ -20,6 +21,9 @@ use candle_core::Device;
 use photomat_brdfs as _;
 use photomat_data::source::DatasetSource;
 use photomat_generator::GeneratorConfig;
+use photomat_generator::train::state::{
+    OPTIMISER_PREFIXES, Restored, STATE_FILE, write_without_optimiser,
+};
 use photomat_generator::train::{
     FlashPlacement, GanEvent, GanTraining, RealBatch, RunPlan, TrainConfig, Trainer, TrainingData,
 };
@@ -119,7 +123,7 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
     first.save_state(&run)?;
     drop(first);
     let mut resumed = Trainer::new(config.clone(), &Device::Cpu)?;
-    resumed.load_state(&run)?;
+    assert_eq!(resumed.load_state(&run)?, Restored::Exactly);
     assert_eq!(resumed.steps_done(), 3);
     for _ in 0..2 {
         resumed.step(&data)?;
@@ -140,6 +144,60 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
     let err = wrong.load_state(&run).err().unwrap().to_string();
     assert!(err.contains("generator.channel_multiplier"), "{err}");
     assert_eq!(wrong.steps_done(), 0);
+    Ok(())
+}
+
+#[test]
+fn a_state_without_optimisers_resumes_the_networks_with_fresh_adam() -> Result<()> {
+    second_order();
+    let dir = tempfile::tempdir()?;
+    let data_dir = simulated_dataset(dir.path(), 8, 3)?;
+    let data = DatasetSource::open(&data_dir, 32)?;
+    let config = tiny_config(&data_dir, true);
+    let run = dir.path().join("run");
+    let mut first = Trainer::new(config.clone(), &Device::Cpu)?;
+    for _ in 0..3 {
+        first.step(&data)?;
+    }
+    first.save_state(&run)?;
+    let portable = dir.path().join("portable");
+    let bytes = write_without_optimiser(&run, &portable)?;
+    let full = std::fs::metadata(run.join(STATE_FILE))?.len();
+    assert!(bytes < full, "{bytes} ≥ {full}");
+    assert!(portable.join("train.json").is_file());
+
+    let mut resumed = Trainer::new(config.clone(), &Device::Cpu)?;
+    assert_eq!(
+        resumed.load_state(&portable)?,
+        Restored::WithFreshOptimisers
+    );
+    assert_eq!(resumed.steps_done(), 3);
+    let fresh = snapshot(Trainer::new(config.clone(), &Device::Cpu)?.state_vars());
+    let (trained, loaded) = (snapshot(first.state_vars()), snapshot(resumed.state_vars()));
+    let is_optimiser = |n: &str| OPTIMISER_PREFIXES.iter().any(|p| n.starts_with(p));
+    let mut optimiser_tensors = 0;
+    for (((name, t), (_, l)), (_, f)) in trained.iter().zip(&loaded).zip(&fresh) {
+        if is_optimiser(name) {
+            optimiser_tensors += 1;
+            assert!(l == f, "`{name}` is not a fresh optimiser's");
+        } else {
+            assert!(l == t, "`{name}` differs from the saved run's");
+        }
+    }
+    assert!(optimiser_tensors > 0);
+    let s = resumed.step(&data)?;
+    assert!(s.skipped.is_empty(), "{s:?}");
+
+    // A state with one optimiser but not the other is refused and loads nothing.
+    photomat_core::checkpoint::copy_checkpoint_where(
+        &run.join(STATE_FILE),
+        &portable.join(STATE_FILE),
+        |name| !name.starts_with("opt_d."),
+    )?;
+    let mut partial = Trainer::new(config, &Device::Cpu)?;
+    let err = partial.load_state(&portable).err().unwrap().to_string();
+    assert!(err.contains("a state holds all of them or none"), "{err}");
+    assert_eq!(partial.steps_done(), 0);
     Ok(())
 }
 

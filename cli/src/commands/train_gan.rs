@@ -37,6 +37,7 @@ use anyhow::Context;
 use candle_core::Device;
 use indicatif::ProgressBar;
 use photomat_data::source::DatasetSource;
+use photomat_generator::train::state::Restored;
 use photomat_generator::train::{GanEvent, GanOutcome, GanSettings, GanTraining, RunLength};
 
 use crate::common::{interruption, steps_bar, stop_flag};
@@ -245,6 +246,14 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         DatasetSource::for_training(&plan.config).context("cannot open the training data")?;
     plan.bind_data(&data)?;
     let mut training = GanTraining::open(&args.out, plan, total, &Device::Cpu)?;
+    if training.restored() == Some(Restored::WithFreshOptimisers) {
+        eprintln!(
+            "note: {} holds no optimiser state (a portable checkpoint): the networks continue \
+             from step {}, Adam restarts from zero moments",
+            args.out.display(),
+            training.trainer().steps_done()
+        );
+    }
     let stop = stop_flag()?;
     let start_step = training.trainer().steps_done();
     let c = training.trainer().config();

@@ -34,7 +34,7 @@ use super::config::{Cadence, TrainConfig};
 use super::data::TrainingData;
 use super::log::{LogRow, TrainLog};
 use super::samples::sample_grid;
-use super::state::{CONFIG_FILE, STATE_FILE, read_config};
+use super::state::{CONFIG_FILE, Restored, STATE_FILE, read_config};
 use super::trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
 use crate::relight::DEFAULT_RELIGHT_LOBES;
 use crate::swd::{SwdConfig, SwdReport, model_swd};
@@ -347,6 +347,8 @@ pub struct GanOutcome {
 /// A GAN training run in its folder.
 pub struct GanTraining {
     trainer: Trainer,
+    /// How a resumed run's state was restored (`None` for a fresh run).
+    restored: Option<Restored>,
     run: PathBuf,
     log: TrainLog,
     total: u64,
@@ -394,17 +396,21 @@ impl GanTraining {
         let lock = FolderLock::acquire(run, "photomat train-gan")?;
         let mut trainer = Trainer::new(plan.config, device)?;
         let log_path = run.join("log.csv");
-        let log = if plan.resume {
-            trainer.load_state(run)?;
-            TrainLog::resume(&log_path, trainer.steps_done())?
+        let (log, restored) = if plan.resume {
+            let restored = trainer.load_state(run)?;
+            (
+                TrainLog::resume(&log_path, trainer.steps_done())?,
+                Some(restored),
+            )
         } else {
             // The configuration is on disk from the start, so a crash before the first
             // checkpoint still leaves a folder that says what it was.
             checkpoint(&trainer, run)?;
-            TrainLog::create(&log_path)?
+            (TrainLog::create(&log_path)?, None)
         };
         Ok(Self {
             trainer,
+            restored,
             run: run.to_path_buf(),
             log,
             total,
@@ -416,6 +422,11 @@ impl GanTraining {
     /// The trainer (configuration, counters, models).
     pub fn trainer(&self) -> &Trainer {
         &self.trainer
+    }
+
+    /// How a resumed run's state was restored; `None` for a fresh run.
+    pub fn restored(&self) -> Option<Restored> {
+        self.restored
     }
 
     /// The total steps the run trains to.

@@ -12,7 +12,13 @@
 //! ([`super::streams`]), so these two files are all a run needs to continue bit-identically.
 //! Loading refuses a state of another configuration naming the differing fields, and a state
 //! file of another architecture naming the mismatching tensor
-//! ([`photomat_core::checkpoint::load_vars_checked`]); nothing is modified when it fails.
+//! ([`photomat_core::checkpoint::load_vars_allowing_absent`]); nothing is modified when it
+//! fails.
+//!
+//! A state may also be kept without the optimisers' moments ([`write_without_optimiser`]):
+//! 45 % of the file, what a run committed to a repository to be continued elsewhere needs.
+//! Resuming from it restores the networks and counters exactly and restarts both Adam
+//! optimisers from zero moments, which is no longer bit-identical to the uninterrupted run.
 
 use std::path::{Path, PathBuf};
 
@@ -26,6 +32,52 @@ use super::config::{TrainConfig, config_differences};
 pub const STATE_FILE: &str = "train_state.safetensors";
 /// The configuration file in a run folder.
 pub const CONFIG_FILE: &str = "train.json";
+
+/// Name prefixes of the optimisers' tensors in [`STATE_FILE`].
+pub const OPTIMISER_PREFIXES: [&str; 2] = ["opt_g.", "opt_d."];
+
+fn is_optimiser(name: &str) -> bool {
+    OPTIMISER_PREFIXES.iter().any(|p| name.starts_with(p))
+}
+
+/// How [`load_state`] restored a run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Restored {
+    /// Every tensor, the optimisers' moments included: the run continues bit-identically.
+    Exactly,
+    /// The networks and counters; the state held no optimiser, so both restart from zero
+    /// moments ([`write_without_optimiser`]).
+    WithFreshOptimisers,
+}
+
+/// Files of a run folder that [`write_without_optimiser`] copies as they are (the last three
+/// only when present).
+const PORTABLE_FILES: [&str; 4] = [CONFIG_FILE, "gan.json", "gan.safetensors", "log.csv"];
+
+/// Writes the run folder `run`'s state into `out` (created) without the optimisers' moments:
+/// `train.json`, the state file less every `opt_g.*` / `opt_d.*` tensor, and the run's
+/// `gan.json`, `gan.safetensors` and `log.csv` as they are. `photomat train-gan --out OUT
+/// --resume` continues it with fresh optimisers ([`Restored::WithFreshOptimisers`]). Returns
+/// the bytes of the state file written.
+pub fn write_without_optimiser(run: &Path, out: &Path) -> anyhow::Result<u64> {
+    use anyhow::Context;
+    read_config(run)?;
+    std::fs::create_dir_all(out).with_context(|| format!("cannot create {}", out.display()))?;
+    photomat_core::checkpoint::copy_checkpoint_where(
+        &run.join(STATE_FILE),
+        &out.join(STATE_FILE),
+        |name| !is_optimiser(name),
+    )?;
+    for (i, name) in PORTABLE_FILES.iter().enumerate() {
+        let from = run.join(name);
+        if i > 0 && !from.exists() {
+            continue;
+        }
+        std::fs::copy(&from, out.join(name))
+            .with_context(|| format!("cannot copy {} into {}", from.display(), out.display()))?;
+    }
+    Ok(std::fs::metadata(out.join(STATE_FILE))?.len())
+}
 
 /// Reads `dir/train.json`; errors name the file.
 pub fn read_config(dir: &Path) -> Result<TrainConfig> {
@@ -62,9 +114,10 @@ pub fn save_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()
 }
 
 /// Loads the run folder `dir` into `state`, after checking that its configuration is
-/// `config` (up to [`TrainConfig::with_resume_changes`]); errors name the file and the differing fields or
-/// tensors.
-pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()> {
+/// `config` (up to [`TrainConfig::with_resume_changes`]); errors name the file and the
+/// differing fields or tensors. A state file without any optimiser tensor loads the rest
+/// ([`Restored::WithFreshOptimisers`]); one with only part of them is an error.
+pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<Restored> {
     let saved = read_config(dir)?;
     // The data set's place, the learning rate and the cadence may change on resume.
     let mut relocated = saved.with_resume_changes(config);
@@ -86,7 +139,32 @@ pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()
         );
     }
     let path: PathBuf = dir.join(STATE_FILE);
-    photomat_core::checkpoint::load_vars_checked(state, &path).map_err(candle_core::Error::wrap)
+    let optimiser_count = {
+        let data = state.data().lock().expect("VarMap lock poisoned");
+        data.keys().filter(|n| is_optimiser(n)).count()
+    };
+    // Checked before loading: a part of the optimisers must not load into the networks'
+    // new state and then fail.
+    let stored_optimiser = {
+        // SAFETY: mapped read-only for this count only, as `load_vars_allowing_absent` does.
+        let file = unsafe { candle_core::safetensors::MmapedSafetensors::new(&path) };
+        file.map(|f| f.tensors().iter().filter(|(n, _)| is_optimiser(n)).count())
+            .unwrap_or(optimiser_count)
+    };
+    if stored_optimiser != 0 && stored_optimiser != optimiser_count {
+        candle_core::bail!(
+            "{}: holds {stored_optimiser} of the optimisers' {optimiser_count} tensors; a state \
+             holds all of them or none",
+            path.display()
+        );
+    }
+    let absent = photomat_core::checkpoint::load_vars_allowing_absent(state, &path, is_optimiser)
+        .map_err(candle_core::Error::wrap)?;
+    Ok(if absent.is_empty() {
+        Restored::Exactly
+    } else {
+        Restored::WithFreshOptimisers
+    })
 }
 
 #[cfg(test)]

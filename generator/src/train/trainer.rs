@@ -50,7 +50,7 @@ use super::data::{TrainingData, omega_for_placements};
 use super::ema::{Ema, ema_beta};
 use super::loss::{discriminator_loss, generator_loss, r1_loss};
 use super::path_length::{PL_BATCH_SHRINK, PathLengthMean, path_lengths, pl_loss, pl_noise};
-use super::state::{load_state, save_state};
+use super::state::{Restored, load_state, save_state};
 use super::streams::{Stream, stream_seed, stream_seeds};
 use crate::model_files::G_PREFIX;
 use crate::{Discriminator, GanModel, NoiseInput, is_buffer, mix_styles, seeded_var_builder};
@@ -326,13 +326,14 @@ impl Trainer {
         save_state(dir, &self.state, &self.config)
     }
 
-    /// Restores a run folder written by [`Trainer::save_state`] for this configuration.
-    pub fn load_state(&mut self, dir: &Path) -> Result<()> {
-        load_state(dir, &self.state, &self.config)?;
+    /// Restores a run folder written by [`Trainer::save_state`] (or
+    /// [`super::state::write_without_optimiser`]) for this configuration.
+    pub fn load_state(&mut self, dir: &Path) -> Result<Restored> {
+        let restored = load_state(dir, &self.state, &self.config)?;
         let c = self.counters.as_tensor().to_vec1::<f64>()?;
         self.step = c[0] as u64;
         self.guard.set_streak(c[1] as usize);
-        Ok(())
+        Ok(restored)
     }
 
     /// Writes the inference model (G_ema + M, [`GanModel::save`]) into `dir`.
