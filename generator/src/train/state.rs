@@ -50,15 +50,16 @@ pub enum Restored {
     WithFreshOptimisers,
 }
 
-/// Files of a run folder that [`write_without_optimiser`] copies as they are (the last three
-/// only when present).
-const PORTABLE_FILES: [&str; 4] = [CONFIG_FILE, "gan.json", "gan.safetensors", "log.csv"];
+/// Files of a run folder that [`write_without_optimiser`] copies as they are (the log only
+/// when present). The model files (`gan.json`, `gan.safetensors`) are left out: G_ema and M
+/// are in the state, and the resumed run's first checkpoint writes them again.
+const PORTABLE_FILES: [&str; 2] = [CONFIG_FILE, "log.csv"];
 
 /// Writes the run folder `run`'s state into `out` (created) without the optimisers' moments:
 /// `train.json`, the state file less every `opt_g.*` / `opt_d.*` tensor, and the run's
-/// `gan.json`, `gan.safetensors` and `log.csv` as they are. `photomat train-gan --out OUT
-/// --resume` continues it with fresh optimisers ([`Restored::WithFreshOptimisers`]). Returns
-/// the bytes of the state file written.
+/// `log.csv` as it is. `photomat train-gan --out OUT --resume` continues it with fresh
+/// optimisers ([`Restored::WithFreshOptimisers`]). Returns the bytes of the state file
+/// written.
 pub fn write_without_optimiser(run: &Path, out: &Path) -> anyhow::Result<u64> {
     use anyhow::Context;
     read_config(run)?;
