@@ -65,6 +65,18 @@ fn photo_of_side(side: f64) -> (Vec<u8>, (f64, f64)) {
     (png, pixel)
 }
 
+/// Mean |a − b| over every element.
+fn mean_abs_difference(a: &Tensor, b: &Tensor) -> f32 {
+    (a - b)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .mean_all()
+        .unwrap()
+        .to_scalar::<f32>()
+        .unwrap()
+}
+
 /// The photo in the training data's geometry (a square of side 2, a 90° field of view).
 fn photo() -> (Vec<u8>, (f64, f64)) {
     photo_of_side(PHOTO_SIDE)
@@ -91,14 +103,7 @@ fn capture_fits_a_rendered_photo_and_writes_a_loadable_folder() {
     );
     let (first, last) = (result.losses[0], *result.losses.last().unwrap());
     assert!(last < first / 4.0, "loss {first} → {last}");
-    let l1 = (&result.render - &result.photo)
-        .unwrap()
-        .abs()
-        .unwrap()
-        .mean_all()
-        .unwrap()
-        .to_scalar::<f32>()
-        .unwrap();
+    let l1 = mean_abs_difference(&result.render, &result.photo);
     assert!(l1 < 0.02, "re-render L1 {l1}");
     // The photo was exposed ×2: the gain takes it, not the albedo alone.
     assert!(result.gain > 1.2, "gain {}", result.gain);
@@ -162,14 +167,7 @@ fn the_right_field_of_view_relights_closer_to_the_truth() {
         // centre), so the renders are compared at the same pixels under the truth's geometry.
         let truth = render_truth(side, &new_flash_positions(side));
         let relit = relight(&fit, &new_flash_positions(fit.side)).unwrap();
-        (relit - truth)
-            .unwrap()
-            .abs()
-            .unwrap()
-            .mean_all()
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap()
+        mean_abs_difference(&relit, &truth)
     };
     let (right, wrong) = (held_out(fov), held_out(TRAINING_FOV_DEGREES));
     assert!(
