@@ -323,9 +323,7 @@ pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
     .collect::<photomat_core::Result<Vec<_>>>()?;
     write_png(&out.join("sheet.png"), &grid(&[row], 0.0)?, PngBits::Eight)?;
     let relit = relight(capture, &new_flash_positions(capture.side))?.clamp(0.0, 1.0)?;
-    let relit = (0..relit.dim(0)?)
-        .map(|i| PlanarImage::from_tensor(&relit.get(i)?))
-        .collect::<photomat_core::Result<Vec<_>>>()?;
+    let relit = PlanarImage::batch_from_tensor(&relit)?;
     write_png(
         &out.join("relit.png"),
         &grid(&[relit], 0.0)?,

@@ -166,6 +166,13 @@ impl PlanarImage {
         Self::new(channels, height, width, data)
     }
 
+    /// One image per item of a (B, C, H, W) tensor, any float dtype, any device.
+    pub fn batch_from_tensor(batch: &Tensor) -> Result<Vec<Self>> {
+        (0..batch.dim(0)?)
+            .map(|i| Self::from_tensor(&batch.get(i)?))
+            .collect()
+    }
+
     /// As a (1, C, H, W) f32 tensor on `device`.
     pub fn to_tensor(&self, device: &Device) -> Result<Tensor> {
         Ok(Tensor::from_slice(

@@ -34,7 +34,7 @@ use super::config::{Cadence, TrainConfig};
 use super::data::TrainingData;
 use super::log::{LogRow, TrainLog};
 use super::samples::sample_grid;
-use super::state::{CONFIG_FILE, Restored, STATE_FILE, read_config};
+use super::state::{CONFIG_FILE, LOG_FILE, Restored, STATE_FILE, read_config};
 use super::trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
 use crate::relight::DEFAULT_RELIGHT_LOBES;
 use crate::swd::{SwdConfig, SwdReport, model_swd};
@@ -395,7 +395,7 @@ impl GanTraining {
         enable_second_order_gradients();
         let lock = FolderLock::acquire(run, "photomat train-gan")?;
         let mut trainer = Trainer::new(plan.config, device)?;
-        let log_path = run.join("log.csv");
+        let log_path = run.join(LOG_FILE);
         let (log, restored) = if plan.resume {
             let restored = trainer.load_state(run)?;
             (

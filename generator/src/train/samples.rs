@@ -37,9 +37,7 @@ const BACKGROUND: f32 = 0.5;
 /// (B, 3, R, R) → B tiles of (3, R, R).
 pub fn display_tiles(images: &Tensor) -> Result<Vec<PlanarImage>> {
     let display = crate::relight::to_display(images)?;
-    (0..display.dim(0)?)
-        .map(|i| PlanarImage::from_tensor(&display.get(i)?).map_err(candle_core::Error::wrap))
-        .collect()
+    PlanarImage::batch_from_tensor(&display).map_err(candle_core::Error::wrap)
 }
 
 /// The grid of `model` (G_ema + M) with real crops of `data`, for the run seeded `run_seed`.

@@ -50,16 +50,15 @@ pub enum Restored {
     WithFreshOptimisers,
 }
 
-/// Files of a run folder that [`write_without_optimiser`] copies as they are (the log only
-/// when present). The model files (`gan.json`, `gan.safetensors`) are left out: G_ema and M
-/// are in the state, and the resumed run's first checkpoint writes them again.
-const PORTABLE_FILES: [&str; 2] = [CONFIG_FILE, "log.csv"];
+/// The per-step log in a run folder.
+pub const LOG_FILE: &str = "log.csv";
 
 /// Writes the run folder `run`'s state into `out` (created) without the optimisers' moments:
 /// `train.json`, the state file less every `opt_g.*` / `opt_d.*` tensor, and the run's
-/// `log.csv` as it is. `photomat train-gan --out OUT --resume` continues it with fresh
-/// optimisers ([`Restored::WithFreshOptimisers`]). Returns the bytes of the state file
-/// written.
+/// `log.csv` as it is (when there is one). The model files (`gan.json`, `gan.safetensors`)
+/// are left out: G_ema and M are in the state, and the resumed run's first checkpoint writes
+/// them again. `photomat train-gan --out OUT --resume` continues it with fresh optimisers
+/// ([`Restored::WithFreshOptimisers`]). Returns the bytes of the state file written.
 pub fn write_without_optimiser(run: &Path, out: &Path) -> anyhow::Result<u64> {
     use anyhow::Context;
     read_config(run)?;
@@ -69,13 +68,14 @@ pub fn write_without_optimiser(run: &Path, out: &Path) -> anyhow::Result<u64> {
         &out.join(STATE_FILE),
         |name| !is_optimiser(name),
     )?;
-    for (i, name) in PORTABLE_FILES.iter().enumerate() {
+    let copy = |name: &str| {
         let from = run.join(name);
-        if i > 0 && !from.exists() {
-            continue;
-        }
         std::fs::copy(&from, out.join(name))
-            .with_context(|| format!("cannot copy {} into {}", from.display(), out.display()))?;
+            .with_context(|| format!("cannot copy {} into {}", from.display(), out.display()))
+    };
+    copy(CONFIG_FILE)?;
+    if run.join(LOG_FILE).exists() {
+        copy(LOG_FILE)?;
     }
     Ok(std::fs::metadata(out.join(STATE_FILE))?.len())
 }
@@ -117,7 +117,8 @@ pub fn save_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<()
 /// Loads the run folder `dir` into `state`, after checking that its configuration is
 /// `config` (up to [`TrainConfig::with_resume_changes`]); errors name the file and the
 /// differing fields or tensors. A state file without any optimiser tensor loads the rest
-/// ([`Restored::WithFreshOptimisers`]); one with only part of them is an error.
+/// ([`Restored::WithFreshOptimisers`]); one with only part of them is an error, before
+/// anything is loaded.
 pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<Restored> {
     let saved = read_config(dir)?;
     // The data set's place, the learning rate and the cadence may change on resume.
@@ -140,31 +141,13 @@ pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<Re
         );
     }
     let path: PathBuf = dir.join(STATE_FILE);
-    let optimiser_count = {
-        let data = state.data().lock().expect("VarMap lock poisoned");
-        data.keys().filter(|n| is_optimiser(n)).count()
-    };
-    // Checked before loading: a part of the optimisers must not load into the networks'
-    // new state and then fail.
-    let stored_optimiser = {
-        // SAFETY: mapped read-only for this count only, as `load_vars_allowing_absent` does.
-        let file = unsafe { candle_core::safetensors::MmapedSafetensors::new(&path) };
-        file.map(|f| f.tensors().iter().filter(|(n, _)| is_optimiser(n)).count())
-            .unwrap_or(optimiser_count)
-    };
-    if stored_optimiser != 0 && stored_optimiser != optimiser_count {
-        candle_core::bail!(
-            "{}: holds {stored_optimiser} of the optimisers' {optimiser_count} tensors; a state \
-             holds all of them or none",
-            path.display()
-        );
-    }
-    let absent = photomat_core::checkpoint::load_vars_allowing_absent(state, &path, is_optimiser)
-        .map_err(candle_core::Error::wrap)?;
-    Ok(if absent.is_empty() {
-        Restored::Exactly
-    } else {
+    let optimisers_absent =
+        photomat_core::checkpoint::load_vars_allowing_absent(state, &path, is_optimiser)
+            .map_err(candle_core::Error::wrap)?;
+    Ok(if optimisers_absent {
         Restored::WithFreshOptimisers
+    } else {
+        Restored::Exactly
     })
 }
 
