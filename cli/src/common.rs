@@ -173,6 +173,18 @@ fn install_handler() -> anyhow::Result<()> {
 }
 
 /// `--detector NAME` of `prepare` and `eval-detector`.
+/// Two finite numbers separated by a comma (`A,B`); errors show `shape`, e.g. `ROW,COL`.
+pub fn parse_pair(text: &str, shape: &str) -> Result<(f64, f64), String> {
+    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
+    match parts.as_slice() {
+        [a, b] => match (a.parse::<f64>(), b.parse::<f64>()) {
+            (Ok(a), Ok(b)) if a.is_finite() && b.is_finite() => Ok((a, b)),
+            _ => Err(format!("'{text}' is not {shape} (two numbers)")),
+        },
+        _ => Err(format!("'{text}' is not {shape} (two numbers)")),
+    }
+}
+
 pub fn parse_detector(name: &str) -> Result<DetectorKind, String> {
     name.parse()
         .map_err(|e: photomat_core::Error| e.to_string())

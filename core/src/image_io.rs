@@ -222,6 +222,21 @@ impl PlanarImage {
         })
     }
 
+    /// Bilinear sample of channel `c` at continuous pixel coordinates (`row`, `col`) (pixel
+    /// (i, j) spans [i, i+1) × [j, j+1), so (i + ½, j + ½) returns it exactly), the image
+    /// repeated periodically in both directions: how a tileable material is read at any point.
+    pub fn sample_periodic(&self, c: usize, row: f64, col: f64) -> f32 {
+        let (y, x) = (row - 0.5, col - 0.5);
+        let (y0, x0) = (y.floor(), x.floor());
+        let (fy, fx) = ((y - y0) as f32, (x - x0) as f32);
+        let wrap = |i: f64, n: usize| i.rem_euclid(n as f64) as usize;
+        let (r0, r1) = (wrap(y0, self.height), wrap(y0 + 1.0, self.height));
+        let (c0, c1) = (wrap(x0, self.width), wrap(x0 + 1.0, self.width));
+        let top = self.get(c, r0, c0) * (1.0 - fx) + self.get(c, r0, c1) * fx;
+        let bottom = self.get(c, r1, c0) * (1.0 - fx) + self.get(c, r1, c1) * fx;
+        top * (1.0 - fy) + bottom * fy
+    }
+
     /// The same image with `f` applied to every sample.
     pub fn map(&self, f: impl Fn(f32) -> f32) -> Self {
         Self {
@@ -468,6 +483,28 @@ pub fn read_exr(path: &Path) -> Result<PlanarImage> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn periodic_sampling_hits_pixel_centres_interpolates_and_wraps() {
+        let data: Vec<f32> = (0..2 * 3 * 4).map(|i| (i * i) as f32).collect();
+        let image = PlanarImage::new(2, 3, 4, data).unwrap();
+        for c in 0..2 {
+            for row in 0..3 {
+                for col in 0..4 {
+                    let (r, q) = (row as f64 + 0.5, col as f64 + 0.5);
+                    assert_eq!(image.sample_periodic(c, r, q), image.get(c, row, col));
+                    // One period away in either direction reads the same texel.
+                    assert_eq!(image.sample_periodic(c, r - 3.0, q + 8.0), image.get(c, row, col));
+                }
+            }
+        }
+        // Half-way between pixel (1, 3) and its right neighbour, which wraps to column 0.
+        let expected = 0.5 * (image.get(1, 1, 3) + image.get(1, 1, 0));
+        assert_eq!(image.sample_periodic(1, 1.5, 4.0), expected);
+        // A quarter down from pixel (2, 1) towards row 0 (wrapped).
+        let expected = 0.75 * image.get(0, 2, 1) + 0.25 * image.get(0, 0, 1);
+        assert!((image.sample_periodic(0, 2.75, 1.5) - expected).abs() < 1e-4);
+    }
 
     #[test]
     fn png_round_trip_is_within_half_a_step() {

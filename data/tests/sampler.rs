@@ -322,6 +322,7 @@ fn sampler_crops_a_prepared_simulation() {
         families: all.iter().take(4).map(|f| f.as_ref()).collect(),
         camera: CameraSource::Phone(PhoneCamera::default()),
         jitter: HighlightJitter::default(),
+        pose: Default::default(),
     };
     let record = simulate(&sim, &config, false, &|| {}).unwrap();
     let options = PrepareOptions {
@@ -572,6 +573,7 @@ fn patch_uniform_positions_rarely_hold_the_highlight_of_simulated_photos() {
         families: all.iter().map(|f| f.as_ref()).collect(),
         camera: CameraSource::Phone(PhoneCamera::default()),
         jitter: HighlightJitter::default(),
+        pose: Default::default(),
     };
     simulate(&sim, &config, false, &|| {}).unwrap();
     let options = PrepareOptions {

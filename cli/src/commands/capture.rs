@@ -12,7 +12,7 @@ use anyhow::Context;
 use photomat_capture::{CaptureOptions, FOV_RANGE, capture, write_capture};
 use photomat_core::{FolderLock, lookup};
 
-use crate::common::steps_bar;
+use crate::common::{parse_pair, steps_bar};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -63,14 +63,7 @@ fn parse_fov(text: &str) -> Result<f64, String> {
 
 /// `ROW,COL`: two finite numbers.
 fn parse_pixel(text: &str) -> Result<(f64, f64), String> {
-    let parts: Vec<&str> = text.split(',').map(str::trim).collect();
-    match parts.as_slice() {
-        [r, c] => match (r.parse::<f64>(), c.parse::<f64>()) {
-            (Ok(r), Ok(c)) if r.is_finite() && c.is_finite() => Ok((r, c)),
-            _ => Err(format!("'{text}' is not ROW,COL (two numbers)")),
-        },
-        _ => Err(format!("'{text}' is not ROW,COL (two numbers)")),
-    }
+    parse_pair(text, "ROW,COL")
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {

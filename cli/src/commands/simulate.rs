@@ -10,6 +10,9 @@
 //! jitter, white-balance error, flash beam profile, vignetting, weak ambient light, sensor
 //! noise, an sRGB or gamma-2.2 tone curve with a mild S-curve, 8-bit JPEG (quality 92) or PNG.
 //! `--camera ideal` switches all of it off (exact renderer output, gamma 2.2).
+//! `--max-tilt` and `--flash-offset` hold the phone as a hand does
+//! (`photomat_data::simulator::pose`): a tilted camera and a flash beside the lens; the true
+//! highlight is then the flash's mirror point as the lens sees it.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -18,11 +21,16 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use photomat_data::procedural::{Family, families, family, family_names};
 use photomat_data::simulator::{
-    CameraModel, CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig,
-    SimulationManifest, simulate,
+    CameraModel, CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, PoseJitter,
+    SimulationConfig, SimulationManifest, simulate,
 };
 
-use crate::common::progress_bar;
+use crate::common::{parse_pair, progress_bar};
+
+/// `LO,HI` of `--flash-offset` (ranges are checked by the simulator).
+fn parse_offset_range(text: &str) -> Result<(f64, f64), String> {
+    parse_pair(text, "LO,HI")
+}
 
 /// Photo file format on the command line.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -78,6 +86,18 @@ pub struct Args {
     #[arg(long, value_name = "FRACTION", default_value_t = 0.04)]
     pub jitter: f64,
 
+    /// Largest tilt of the phone away from the plane's normal, degrees (uniform in [0, MAX]
+    /// about a random axis; at most 30). 0, the default, is the training convention: the
+    /// camera looks straight down.
+    #[arg(long, value_name = "DEGREES", default_value_t = 0.0)]
+    pub max_tilt: f64,
+
+    /// Distance of the flash from the lens as a range LO,HI, a fraction of the camera's height
+    /// (uniform, in a random direction; at most 0.25). `0,0`, the default, puts the flash in
+    /// the lens. Hand-held phones: `--max-tilt 12 --flash-offset 0.03,0.07`.
+    #[arg(long, value_name = "LO,HI", default_value = "0,0", value_parser = parse_offset_range)]
+    pub flash_offset: (f64, f64),
+
     /// Replace a previous simulation in DIR (removes DIR/photos, DIR/truth and
     /// DIR/simulation.json, nothing else).
     #[arg(long)]
@@ -123,6 +143,10 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         jitter: HighlightJitter {
             sigma: args.jitter,
             ..HighlightJitter::default()
+        },
+        pose: PoseJitter {
+            max_tilt_degrees: args.max_tilt,
+            flash_offset: args.flash_offset,
         },
     };
     let pool = rayon::ThreadPoolBuilder::new()

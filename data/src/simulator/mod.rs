@@ -13,6 +13,7 @@
 
 pub mod camera;
 pub mod output;
+pub mod pose;
 pub mod random;
 pub mod scene;
 
@@ -30,6 +31,7 @@ pub use output::{
     FORMAT_TAG, FORMAT_VERSION, PHOTOS_DIR, PhotoFormat, SIMULATION_FILE, SimulatedPhoto,
     SimulationManifest, TRUTH_DIR, write_photo,
 };
+pub use pose::{PhonePose, PoseJitter};
 pub use scene::{HighlightJitter, PHOTO_SIDE, Scene};
 
 use crate::procedural::Family;
@@ -58,8 +60,11 @@ pub struct SimulationConfig<'a> {
     pub families: Vec<&'a dyn Family>,
     /// The cameras.
     pub camera: CameraSource,
-    /// The highlight distribution.
+    /// The highlight distribution: where the untilted camera is centred.
     pub jitter: HighlightJitter,
+    /// The phone poses (tilt, flash offset; [`PoseJitter::default`] for the overhead pose
+    /// of the training convention).
+    pub pose: PoseJitter,
 }
 
 /// Smallest photo side: the camera's centre-weighted meter needs a central half of at least
@@ -90,6 +95,7 @@ pub fn simulate(
     if let CameraSource::Fixed(camera) = &config.camera {
         camera.validate()?;
     }
+    config.pose.validate()?;
     prepare_output(out, overwrite)?;
     let photos = (0..config.count)
         .into_par_iter()
@@ -155,10 +161,25 @@ fn simulate_photo(
         ))
     };
     let (row, col) = config.jitter.sample(config.size, &mut rng);
-    let highlight = Highlight::from_pixel_on(row, col, config.size, PHOTO_SIDE);
+    let above = Highlight::from_pixel_on(row, col, config.size, PHOTO_SIDE);
+    let pose = if config.pose.is_overhead() {
+        PhonePose::OVERHEAD
+    } else {
+        config
+            .pose
+            .sample(&mut random::pose_rng(config.seed, index as u64))
+    };
     let scene =
         Scene::from_family(family, config.size, family_seed, &Device::Cpu).map_err(context)?;
-    let light = scene.light(highlight).map_err(context)?;
+    let (seen, light) = scene.seen_from(above, &pose).map_err(context)?;
+    // The true highlight is the flash's mirror point as the lens sees it; for the overhead
+    // pose that is the drawn point itself, kept as drawn so that no rounding changes it.
+    let (row, col) = if pose.is_overhead() {
+        (row, col)
+    } else {
+        pose.pixel_of(above, pose.mirror_point(above), config.size, PHOTO_SIDE)
+    };
+    let highlight = Highlight::from_pixel_on(row, col, config.size, PHOTO_SIDE);
     let camera = match &config.camera {
         CameraSource::Phone(phone) => phone.sample(&light, &mut rng).map_err(context)?,
         CameraSource::Fixed(camera) => *camera,
@@ -171,8 +192,8 @@ fn simulate_photo(
     write_photo(&out.join(&photo_rel), &photo, config.format)?;
     save_maps(
         &out.join(&truth_rel),
-        scene.brdf().as_ref(),
-        scene.maps(),
+        seen.brdf().as_ref(),
+        seen.maps(),
         &SaveOptions::default(),
     )?;
     Ok(SimulatedPhoto {
@@ -183,5 +204,6 @@ fn simulate_photo(
         highlight_px: [row, col],
         highlight: [highlight.x, highlight.y],
         camera,
+        pose: (!pose.is_overhead()).then_some(pose),
     })
 }

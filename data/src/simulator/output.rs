@@ -15,6 +15,7 @@ use photomat_core::image_io::{PlanarImage, PngBits, encode_png, write_atomic};
 use photomat_core::{Error, Result};
 
 use super::camera::CameraModel;
+use super::pose::PhonePose;
 
 /// JPEG quality of simulated photos: a phone camera's default.
 pub const JPEG_QUALITY: u8 = 92;
@@ -125,6 +126,9 @@ pub struct SimulatedPhoto {
     pub highlight: [f64; 2],
     /// The camera that took the photo.
     pub camera: CameraModel,
+    /// The phone's tilt and flash offset; absent for the overhead pose.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pose: Option<PhonePose>,
 }
 
 impl SimulationManifest {
@@ -208,6 +212,7 @@ mod tests {
                 highlight_px: [30.5, 33.25],
                 highlight: [0.0390625, 0.046875],
                 camera: CameraModel::ideal(),
+                pose: None,
             }],
         };
         manifest.write(dir.path()).unwrap();

@@ -2,7 +2,8 @@
 //! few distributions the simulator draws from (normal, log-uniform).
 //!
 //! Photo `i` of a run with seed `K` draws everything (family seed, highlight, camera, sensor
-//! noise) from its own [`StdRng`] seeded with a SplitMix64 mix of `(K, i)`, in a fixed order.
+//! noise) from its own [`StdRng`] seeded with a SplitMix64 mix of `(K, i)`, in a fixed order;
+//! its phone pose, when poses are on, from a second stream ([`pose_rng`]).
 //! Photos therefore do not depend on each other, on the order in which threads finish, or on
 //! the thread count. `StdRng` is reproducible for a given `rand` version (rand 0.9: ChaCha12);
 //! a `rand` upgrade may change the pictures a seed gives, never their distribution.
@@ -16,6 +17,15 @@ use crate::procedural::noise::mix64;
 /// The generator of photo `index` in a run seeded with `seed`.
 pub fn photo_rng(seed: u64, index: u64) -> StdRng {
     StdRng::seed_from_u64(mix64(mix64(seed) ^ index))
+}
+
+/// The generator of photo `index`'s phone pose ([`super::pose`]): a stream of its own, so
+/// that turning poses on leaves every other draw of the photo (family, highlight, camera,
+/// noise) as it was, and runs without poses keep their bytes.
+pub fn pose_rng(seed: u64, index: u64) -> StdRng {
+    // Any fixed odd constant separates the two streams; this one spells "pose".
+    const POSE_STREAM: u64 = 0x706f_7365;
+    StdRng::seed_from_u64(mix64(mix64(seed ^ POSE_STREAM) ^ index))
 }
 
 /// A standard normal sample (Box–Muller; one of the pair is discarded, which keeps the draw

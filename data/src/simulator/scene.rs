@@ -13,8 +13,10 @@
 //! ([`photomat_core::DifferentiableBrdf::shading_maps`]: e.g. `ggx` with the implied normal);
 //! they are both what is rendered and the ground truth written to `truth/`.
 
-use candle_core::{DType, Device};
+use candle_core::{DType, Device, Tensor};
+use photomat_core::flash::FLASH_INTENSITY;
 use photomat_core::image_io::PlanarImage;
+use photomat_core::param::ColorSpace;
 use photomat_core::plugin_spec::{ArgValue, PluginSpec};
 use photomat_core::registry::registrations;
 use photomat_core::{
@@ -23,6 +25,7 @@ use photomat_core::{
 use rand::Rng;
 
 use super::camera::{CameraModel, SceneRadiance};
+use super::pose::PhonePose;
 use super::random::standard_normal;
 use crate::procedural::Family;
 
@@ -116,6 +119,80 @@ impl Scene {
         })
     }
 
+    /// What a phone in `pose` sees (module docs of [`super::pose`]): the maps resampled at
+    /// the plane points of its S×S pixels (bilinear, the material repeated periodically, unit
+    /// vectors renormalised), and the light reaching each pixel from the flash beside the lens
+    /// (the BRDF evaluated with separate light and view directions, falloff 1/d² from the
+    /// flash). The overhead pose returns this scene and [`Self::light`] unchanged.
+    pub fn seen_from(&self, highlight: Highlight, pose: &PhonePose) -> Result<(Scene, SceneRadiance)> {
+        if pose.is_overhead() {
+            return Ok((self.clone(), self.light(highlight)?));
+        }
+        pose.validate()?;
+        let size = self.size;
+        let points = pose.plane_points(highlight, size, PHOTO_SIDE)?;
+        let seen = self.resampled_at(&points)?;
+        let (camera, flash) = (pose.camera(highlight), pose.flash(highlight));
+        let plane = size * size;
+        let mut wi = vec![0f32; 3 * plane];
+        let mut wo = vec![0f32; 3 * plane];
+        let mut inv_dist2 = vec![0f32; plane];
+        for (t, &p) in points.iter().enumerate() {
+            let to_flash = flash - p;
+            let (light, view) = (to_flash.normalize(), (camera - p).normalize());
+            for c in 0..3 {
+                wi[c * plane + t] = light[c] as f32;
+                wo[c * plane + t] = view[c] as f32;
+            }
+            inv_dist2[t] = (1.0 / to_flash.length_squared()) as f32;
+        }
+        let device = self.maps.get(self.maps.names()[0])?.device().clone();
+        let directions = |data: Vec<f32>| Tensor::from_vec(data, (1, 3, size, size), &device);
+        let (wi, wo) = (directions(wi)?, directions(wo)?);
+        let inv_dist2 = Tensor::from_vec(inv_dist2, (1, 1, size, size), &device)?;
+        let f_cos = seen.brdf.eval(&wi, &wo, &seen.maps)?;
+        let radiance = (f_cos.broadcast_mul(&inv_dist2)? * FLASH_INTENSITY)?;
+        let light = SceneRadiance {
+            flash: PlanarImage::from_tensor(&radiance)?,
+            ambient_reflectance: seen.ambient_reflectance()?,
+            highlight,
+            side: PHOTO_SIDE,
+        };
+        Ok((seen, light))
+    }
+
+    /// The scene's maps read at `points` (one per output texel, row-major, S² of them) of the
+    /// plane: bilinear and periodic, unit-vector maps renormalised.
+    fn resampled_at(&self, points: &[glam::DVec3]) -> Result<Scene> {
+        let size = self.size;
+        let texel = PHOTO_SIDE / size as f64;
+        let mut maps = MaterialMaps::new();
+        for (name, map) in self.maps.iter() {
+            let image = PlanarImage::from_tensor(map)?;
+            let mut out = PlanarImage::filled(image.channels, size, size, 0.0);
+            for (t, p) in points.iter().enumerate() {
+                // Continuous pixel coordinates of p on the S×S grid over the centred square.
+                let (row, col) = (
+                    (PHOTO_SIDE / 2.0 - p.y) / texel,
+                    (p.x + PHOTO_SIDE / 2.0) / texel,
+                );
+                for c in 0..image.channels {
+                    out.data[c * size * size + t] = image.sample_periodic(c, row, col);
+                }
+            }
+            let unit_vector = self
+                .brdf
+                .params()
+                .iter()
+                .any(|spec| spec.name == name && spec.color_space == ColorSpace::UnitVector);
+            if unit_vector {
+                renormalise(&mut out);
+            }
+            maps.insert(name, out.to_tensor(map.device())?.to_dtype(map.dtype())?);
+        }
+        Scene::new(self.brdf.clone(), maps)
+    }
+
     /// The photo (3, S, S display values in [0, 1]) that `camera` takes with the flash at
     /// `highlight`: [`CameraModel::develop`] of [`Self::light`].
     pub fn photograph(
@@ -141,6 +218,24 @@ impl Scene {
             }
         }
         Ok(total)
+    }
+}
+
+/// Scale every texel of a 3-channel image to unit length (bilinear blends of unit normals are
+/// shorter than 1; they never vanish, since neighbouring normals lie within 90° of each other
+/// on any height map).
+fn renormalise(image: &mut PlanarImage) {
+    let plane = image.texels();
+    for t in 0..plane {
+        let v = glam::Vec3::new(
+            image.data[t],
+            image.data[plane + t],
+            image.data[2 * plane + t],
+        )
+        .normalize();
+        for c in 0..3 {
+            image.data[c * plane + t] = v[c];
+        }
     }
 }
 

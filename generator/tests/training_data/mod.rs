@@ -39,6 +39,7 @@ pub fn simulated_dataset(dir: &Path, count: usize, seed: u64) -> Result<PathBuf>
         families: all.iter().map(|f| f.as_ref()).collect(),
         camera: CameraSource::Phone(PhoneCamera::default()),
         jitter: HighlightJitter::default(),
+        pose: Default::default(),
     };
     simulate(&sim, &config, false, &|| {})?;
     let options = PrepareOptions {
