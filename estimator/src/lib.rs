@@ -25,8 +25,8 @@
 //! - [`circular_pad()`]: wrap-around padding by `narrow` + `cat` ([`mod@circular_pad`]).
 //! - [`leaky_relu`]: the activation as one fused element-wise pass each way ([`activation`],
 //!   from `photomat-kernels`).
-//! - [`upsample2x_periodic`]: ×2 bilinear upsampling with a periodic boundary as two
-//!   interpolation-matrix products ([`upsample`]).
+//! - [`upsample2x_periodic`]: ×2 bilinear upsampling with a periodic boundary as two sparse
+//!   interpolation-matrix passes ([`upsample`]).
 //!
 //! Every layer wraps around the image borders, so E commutes with rolls by multiples of 32
 //! texels and maps periodic (tileable) features to periodic maps.
@@ -70,7 +70,7 @@ pub use conv_grad::conv2d_fast_backward;
 pub use model_files::{EstimatorManifest, EstimatorModel};
 pub use photomat_kernels::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use unet::{Estimator, EstimatorConfig};
-pub use upsample::{periodic_upsample_matrix, upsample2x_periodic};
+pub use upsample::{periodic_upsample_axis, periodic_upsample_matrix, upsample2x_periodic};
 
 /// Deterministic test inputs (`photomat-core`'s seeded generator) and comparisons
 /// (`photomat-kernels`) shared by the unit tests.

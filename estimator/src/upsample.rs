@@ -23,14 +23,16 @@
 //! tileable estimator, hence the deviation (recorded in the crate docs).
 //!
 //! # Implementation
-//! candle 0.11 has no backward pass for its bilinear upsampling (`docs/candle-notes.md`, "Gradients
-//! that are wrong or missing, with no error"), so the operator is written as `U_H · X · U_Wᵀ` with
-//! the sparse (2N × N) interpolation matrix `U` of [`periodic_upsample_matrix`] stored densely: two
-//! matmuls, whose gradients are exact (`Uᵀ · G · U`). The matrices are constants; candle's matmul
-//! backward still computes (and drops) a gradient for them, which makes the backward ≈ 3 matmuls
-//! instead of 2.
+//! Each axis is a constant sparse matrix `U` (2N × N, two non-zeros per row,
+//! [`periodic_upsample_axis`]) applied by `photomat_kernels::fir::separable`: the compressed-row
+//! passes that also run StyleGAN2's FIR filters, two multiply-adds per output element and axis,
+//! differentiable to any order (the backward of a pass is the pass of `Uᵀ`). Under
+//! `--candle-reference`, on other devices and dtypes the same matrices run densely as
+//! `U_H · X · U_Wᵀ` by candle `matmul`s (candle 0.11 has no backward for its own bilinear
+//! upsampling: `docs/candle-notes.md`, "Gradients that are wrong or missing, with no error").
 
 use candle_core::{DType, Device, Result, Tensor, bail};
+use photomat_kernels::fir::{AxisMatrix, separable};
 
 /// Weight of the nearer input texel (distance ¼ texel) in ×2 bilinear interpolation.
 const NEAR: f64 = 0.75;
@@ -44,20 +46,27 @@ const FAR: f64 = 0.25;
 /// to 1, so constants are preserved exactly (¼ and ¾ are exact in every float format).
 ///
 /// # Shapes
-/// (2n, n), `dtype` on `device`; `n` ≥ 1.
-pub fn periodic_upsample_matrix(n: usize, dtype: DType, device: &Device) -> Result<Tensor> {
+/// 2n × n; `n` ≥ 1.
+pub fn periodic_upsample_axis(n: usize) -> Result<AxisMatrix> {
     if n == 0 {
         bail!("cannot upsample an axis of length 0");
     }
-    let mut u = vec![0f64; 2 * n * n];
-    for i in 0..n {
-        let (prev, next) = ((i + n - 1) % n, (i + 1) % n);
-        u[(2 * i) * n + i] += NEAR;
-        u[(2 * i) * n + prev] += FAR;
-        u[(2 * i + 1) * n + i] += NEAR;
-        u[(2 * i + 1) * n + next] += FAR;
-    }
-    Tensor::from_vec(u, (2 * n, n), device)?.to_dtype(dtype)
+    let rows: Vec<Vec<(usize, f64)>> = (0..2 * n)
+        .map(|o| {
+            let (i, odd) = (o / 2, o % 2 == 1);
+            let far = if odd { (i + 1) % n } else { (i + n - 1) % n };
+            vec![(i, NEAR), (far, FAR)]
+        })
+        .collect();
+    AxisMatrix::from_rows(n, &rows)
+}
+
+/// [`periodic_upsample_axis`] as a dense tensor.
+///
+/// # Shapes
+/// (2n, n), `dtype` on `device`; `n` ≥ 1.
+pub fn periodic_upsample_matrix(n: usize, dtype: DType, device: &Device) -> Result<Tensor> {
+    periodic_upsample_axis(n)?.to_dense(dtype, device)
 }
 
 /// Periodic ×2 bilinear upsampling (`align_corners = False`, wrap-around; see the module docs).
@@ -65,16 +74,8 @@ pub fn periodic_upsample_matrix(n: usize, dtype: DType, device: &Device) -> Resu
 /// # Shapes
 /// (B, C, H, W) → (B, C, 2H, 2W); H, W ≥ 1. Any float dtype.
 pub fn upsample2x_periodic(x: &Tensor) -> Result<Tensor> {
-    let (b, c, h, w) = x.dims4()?;
-    let u_h = periodic_upsample_matrix(h, x.dtype(), x.device())?;
-    let u_w = periodic_upsample_matrix(w, x.dtype(), x.device())?;
-    // Columns: (B·C·H, W) · U_Wᵀ (W, 2W), one large product over contiguous rows.
-    let x = x.contiguous()?.reshape((b * c * h, w))?.matmul(&u_w.t()?)?;
-    // Rows: U_H (2H, H) · X (H, 2W) for each of the B·C planes; the matrix is broadcast with
-    // batch stride 0, which candle's CPU matmul supports without copying.
-    let x = x.reshape((b * c, h, 2 * w))?;
-    let x = u_h.broadcast_left(b * c)?.matmul(&x)?;
-    x.reshape((b, c, 2 * h, 2 * w))
+    let (_, _, h, w) = x.dims4()?;
+    separable(x, &periodic_upsample_axis(h)?, &periodic_upsample_axis(w)?)
 }
 
 #[cfg(test)]
