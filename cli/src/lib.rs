@@ -8,6 +8,9 @@
 //! // my-photomat/src/main.rs
 //! mod my_brdf; // calls photomat_core::register_brdf!(…)
 //! fn main() -> std::process::ExitCode {
+//!     // SAFETY: the first statement of `main`, before any thread starts
+//!     // (`photomat_kernels::threads`: candle's element-wise ops on the calling thread).
+//!     unsafe { photomat_kernels::threads::run_candle_elementwise_inline() };
 //!     photomat_cli::run()
 //! }
 //! ```

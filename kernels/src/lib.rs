@@ -20,6 +20,8 @@
 //! - [`reference`]: a per-thread switch sending every op to its candle reference composition
 //!   (equivalence tests, same-process baselines).
 //! - [`alloc`]: the global allocator (mimalloc, opt-in feature) and thread count binaries use.
+//! - [`threads`]: binaries run candle's element-wise ops on the calling thread (candle's own
+//!   pool spins, which slows every step on a busy machine).
 //! - [`testing`]: tensor comparisons for tests and benchmarks (their seeded inputs come from
 //!   `photomat_core::rng`, a dev-dependency).
 //!
@@ -37,6 +39,7 @@ pub mod modulated_conv;
 pub mod noise_act;
 pub mod reference;
 pub mod testing;
+pub mod threads;
 
 pub use activation::{bias_leaky_relu_gain, leaky_relu, leaky_relu_gain};
 pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
