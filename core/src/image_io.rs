@@ -494,7 +494,10 @@ mod tests {
                     let (r, q) = (row as f64 + 0.5, col as f64 + 0.5);
                     assert_eq!(image.sample_periodic(c, r, q), image.get(c, row, col));
                     // One period away in either direction reads the same texel.
-                    assert_eq!(image.sample_periodic(c, r - 3.0, q + 8.0), image.get(c, row, col));
+                    assert_eq!(
+                        image.sample_periodic(c, r - 3.0, q + 8.0),
+                        image.get(c, row, col)
+                    );
                 }
             }
         }

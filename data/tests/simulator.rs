@@ -212,13 +212,17 @@ impl Family for Mirror {
     }
 }
 
-#[test]
-fn simulator_recorded_highlight_is_the_rendered_peak() {
-    let size = 64;
-    let config = SimulationConfig {
+/// Twelve PNG photos of [`Mirror`] by a fixed camera exposed for its peak.
+fn mirror_photos(
+    size: usize,
+    seed: u64,
+    jitter: HighlightJitter,
+    pose: PoseJitter,
+) -> SimulationConfig<'static> {
+    SimulationConfig {
         count: 12,
         size,
-        seed: 11,
+        seed,
         format: PhotoFormat::Png,
         families: vec![&Mirror as &dyn Family],
         // Peak radiance of the lobe (α = 0.2² = 0.04): F0·D(0)·π/4 = 0.04/(π·0.04²)·π/4 =
@@ -228,12 +232,19 @@ fn simulator_recorded_highlight_is_the_rendered_peak() {
             exposure: 0.12,
             ..CameraModel::ideal()
         }),
-        jitter: HighlightJitter {
-            sigma: 0.08,
-            ..HighlightJitter::default()
-        },
-        pose: Default::default(),
+        jitter,
+        pose,
+    }
+}
+
+#[test]
+fn simulator_recorded_highlight_is_the_rendered_peak() {
+    let size = 64;
+    let jitter = HighlightJitter {
+        sigma: 0.08,
+        ..HighlightJitter::default()
     };
+    let config = mirror_photos(size, 11, jitter, PoseJitter::default());
     let (dir, manifest) = run(&config, 2);
     let mut off_centre = 0;
     for photo in &manifest.photos {
@@ -264,19 +275,7 @@ fn simulator_hand_held_highlight_is_the_rendered_peak() {
     // flash beside the lens: the recorded highlight (the flash's mirror point seen through
     // the lens) must still be where the photo is brightest.
     let size = 64;
-    let config = SimulationConfig {
-        count: 12,
-        size,
-        seed: 5,
-        format: PhotoFormat::Png,
-        families: vec![&Mirror as &dyn Family],
-        camera: CameraSource::Fixed(CameraModel {
-            exposure: 0.12,
-            ..CameraModel::ideal()
-        }),
-        jitter: HighlightJitter::default(),
-        pose: PoseJitter::HAND_HELD,
-    };
+    let config = mirror_photos(size, 5, HighlightJitter::default(), PoseJitter::HAND_HELD);
     let (dir, manifest) = run(&config, 2);
     let mut moved = 0;
     for photo in &manifest.photos {
@@ -284,9 +283,16 @@ fn simulator_hand_held_highlight_is_the_rendered_peak() {
         assert!(pose.tilt_degrees <= 12.0);
         let (image, _) = read_png(&dir.path().join(&photo.photo)).unwrap();
         let brightest = (0..image.texels())
-            .max_by(|&a, &b| image.get(1, a / size, a % size).total_cmp(&image.get(1, b / size, b % size)))
+            .max_by(|&a, &b| {
+                image
+                    .get(1, a / size, a % size)
+                    .total_cmp(&image.get(1, b / size, b % size))
+            })
             .unwrap();
-        let peak = ((brightest / size) as f64 + 0.5, (brightest % size) as f64 + 0.5);
+        let peak = (
+            (brightest / size) as f64 + 0.5,
+            (brightest % size) as f64 + 0.5,
+        );
         let [row, col] = photo.highlight_px;
         // The lobe's peak sits on the mirror point up to the pixel grid and the slight pull
         // of cos θ and 1/d² (under a pixel at this roughness).
@@ -331,7 +337,11 @@ fn simulator_posed_renderer_with_an_untilted_lens_flash_equals_the_collocated_on
             .zip(&expected.flash.data)
             .map(|(a, b)| (a - b).abs() / b.abs().max(1e-3))
             .fold(0f32, f32::max);
-        assert!(worst < 1e-4, "{}: relative difference {worst}", family.name());
+        assert!(
+            worst < 1e-4,
+            "{}: relative difference {worst}",
+            family.name()
+        );
         assert_eq!(light.ambient_reflectance, expected.ambient_reflectance);
     }
 }

@@ -131,7 +131,13 @@ impl PhonePose {
 
     /// The pixel (row, col), continuous, that sees `point` on the plane: the inverse of
     /// [`Self::plane_point`].
-    pub fn pixel_of(&self, highlight: Highlight, point: DVec3, size: usize, side: f64) -> (f64, f64) {
+    pub fn pixel_of(
+        &self,
+        highlight: Highlight,
+        point: DVec3,
+        size: usize,
+        side: f64,
+    ) -> (f64, f64) {
         let camera = self.camera(highlight);
         let untilted = self.rotation().transpose() * (point - camera);
         let on_plane = camera + untilted * (-camera.z / untilted.z);
@@ -249,7 +255,9 @@ mod tests {
     #[test]
     fn overhead_pixels_look_at_their_texel_centres() {
         let highlight = Highlight::new(0.07, -0.05);
-        let points = PhonePose::OVERHEAD.plane_points(highlight, 8, SIDE).unwrap();
+        let points = PhonePose::OVERHEAD
+            .plane_points(highlight, 8, SIDE)
+            .unwrap();
         for row in 0..8 {
             for col in 0..8 {
                 let expected = texel_center_on(row, col, 8, SIDE);
@@ -268,7 +276,9 @@ mod tests {
     fn pixel_of_inverts_plane_point() {
         let highlight = Highlight::new(-0.1, 0.08);
         for (row, col) in [(0.5, 0.5), (10.25, 50.0), (63.5, 0.5), (32.0, 32.0)] {
-            let p = posed().plane_point(highlight, (row, col), 64, SIDE).unwrap();
+            let p = posed()
+                .plane_point(highlight, (row, col), 64, SIDE)
+                .unwrap();
             assert_abs_diff_eq!(p.z, 0.0, epsilon = 1e-12);
             let (r, c) = posed().pixel_of(highlight, p, 64, SIDE);
             assert_abs_diff_eq!(r, row, epsilon = 1e-9);

@@ -124,7 +124,11 @@ impl Scene {
     /// vectors renormalised), and the light reaching each pixel from the flash beside the lens
     /// (the BRDF evaluated with separate light and view directions, falloff 1/d² from the
     /// flash). The overhead pose returns this scene and [`Self::light`] unchanged.
-    pub fn seen_from(&self, highlight: Highlight, pose: &PhonePose) -> Result<(Scene, SceneRadiance)> {
+    pub fn seen_from(
+        &self,
+        highlight: Highlight,
+        pose: &PhonePose,
+    ) -> Result<(Scene, SceneRadiance)> {
         if pose.is_overhead() {
             return Ok((self.clone(), self.light(highlight)?));
         }
