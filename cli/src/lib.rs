@@ -10,7 +10,10 @@
 //! fn main() -> std::process::ExitCode {
 //!     // SAFETY: the first statement of `main`, before any thread starts
 //!     // (`photomat_kernels::threads`: candle's element-wise ops on the calling thread).
-//!     unsafe { photomat_kernels::threads::run_candle_elementwise_inline() };
+//!     unsafe {
+//!         photomat_kernels::threads::run_candle_elementwise_inline();
+//!         photomat_kernels::threads::fix_rayon_thread_count();
+//!     }
 //!     photomat_cli::run()
 //! }
 //! ```

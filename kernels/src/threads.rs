@@ -10,7 +10,10 @@
 //! capture took 5–6× as long as with one candle thread. One candle thread was as fast as
 //! the default on the idle machine for every measured step (`docs/benchmarks.md`, "candle's
 //! spinning element-wise pool"), because the time is in GEMMs and fused kernels, which keep
-//! `RAYON_NUM_THREADS` threads.
+//! `RAYON_NUM_THREADS` threads, which [`fix_rayon_thread_count`] writes down once.
+
+/// The variable rayon's global pool and candle's GEMMs read for their thread count.
+pub const RAYON_THREADS_VAR: &str = "RAYON_NUM_THREADS";
 
 /// The environment variable candle reads, once, when it starts its element-wise pool.
 pub const CANDLE_THREADS_VAR: &str = "CANDLE_NUM_THREADS";
@@ -29,4 +32,22 @@ pub unsafe fn run_candle_elementwise_inline() -> bool {
     // SAFETY: the caller guarantees that no other thread exists yet.
     unsafe { std::env::set_var(CANDLE_THREADS_VAR, "1") };
     true
+}
+
+/// Writes candle's default thread count (the physical cores) into `RAYON_NUM_THREADS` unless
+/// the user has set it; returns the count it wrote. Without the variable candle counts the
+/// physical cores by reading `/proc/cpuinfo` at every matrix product (0.9 % of a GAN step's
+/// profile, in the kernel's `show_cpuinfo`); with it, rayon's pool and candle's GEMMs also
+/// agree on one count. Call it first thing in `main`, like [`run_candle_elementwise_inline`].
+///
+/// # Safety
+/// As for [`run_candle_elementwise_inline`]: no other thread may exist yet.
+pub unsafe fn fix_rayon_thread_count() -> Option<usize> {
+    if std::env::var_os(RAYON_THREADS_VAR).is_some() {
+        return None;
+    }
+    let count = candle_core::utils::get_num_threads();
+    // SAFETY: the caller guarantees that no other thread exists yet.
+    unsafe { std::env::set_var(RAYON_THREADS_VAR, count.to_string()) };
+    Some(count)
 }
