@@ -4,7 +4,8 @@
 //! Photo `i` of a run: its family is the `i mod F`-th of the run's F families (so every family
 //! is equally represented), then, from the photo's own random stream ([`random`]): the
 //! family's seed, the highlight ([`HighlightJitter`], Gaussian around the centre), the camera
-//! ([`PhoneCamera`] or a fixed [`CameraModel`]) and the sensor noise. The material is rendered
+//! ([`PhoneCamera`] or a fixed [`CameraModel`]) and the sensor noise; with poses on, the
+//! phone's tilt and flash offset from a stream of its own ([`pose`]). The material is rendered
 //! over the photo's square of side 2 with the analytic flash renderer ([`scene`]), developed
 //! by the camera model ([`camera`]) and written with its shading-model maps and the true
 //! highlight ([`output`], format in docs/datasets.md). Photos are simulated in parallel
