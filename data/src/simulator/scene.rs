@@ -19,6 +19,7 @@ use photomat_core::image_io::PlanarImage;
 use photomat_core::param::ColorSpace;
 use photomat_core::plugin_spec::{ArgValue, PluginSpec};
 use photomat_core::registry::registrations;
+use photomat_core::vecops::normalize3;
 use photomat_core::{
     Brdf, Error, FlashGeometry, Highlight, MaterialMaps, Result, lookup, render_radiance_with,
 };
@@ -169,17 +170,16 @@ impl Scene {
     /// plane: bilinear and periodic, unit-vector maps renormalised.
     fn resampled_at(&self, points: &[glam::DVec3]) -> Result<Scene> {
         let size = self.size;
-        let texel = PHOTO_SIDE / size as f64;
+        // Continuous pixel coordinates of each point on the S×S grid over the centred square.
+        let pixels: Vec<(f64, f64)> = points
+            .iter()
+            .map(|p| Highlight::new(p.x, p.y).to_pixel_on(size, PHOTO_SIDE))
+            .collect();
         let mut maps = MaterialMaps::new();
         for (name, map) in self.maps.iter() {
             let image = PlanarImage::from_tensor(map)?;
             let mut out = PlanarImage::filled(image.channels, size, size, 0.0);
-            for (t, p) in points.iter().enumerate() {
-                // Continuous pixel coordinates of p on the S×S grid over the centred square.
-                let (row, col) = (
-                    (PHOTO_SIDE / 2.0 - p.y) / texel,
-                    (p.x + PHOTO_SIDE / 2.0) / texel,
-                );
+            for (t, &(row, col)) in pixels.iter().enumerate() {
                 for c in 0..image.channels {
                     out.data[c * size * size + t] = image.sample_periodic(c, row, col);
                 }
@@ -189,10 +189,13 @@ impl Scene {
                 .params()
                 .iter()
                 .any(|spec| spec.name == name && spec.color_space == ColorSpace::UnitVector);
+            let mut seen = out.to_tensor(map.device())?.to_dtype(map.dtype())?;
             if unit_vector {
-                renormalise(&mut out);
+                // Bilinear blends of unit normals are shorter than 1 (never zero: neighbouring
+                // normals of a height map lie within 90° of each other).
+                seen = normalize3(&seen)?;
             }
-            maps.insert(name, out.to_tensor(map.device())?.to_dtype(map.dtype())?);
+            maps.insert(name, seen);
         }
         Scene::new(self.brdf.clone(), maps)
     }
@@ -222,24 +225,6 @@ impl Scene {
             }
         }
         Ok(total)
-    }
-}
-
-/// Scale every texel of a 3-channel image to unit length (bilinear blends of unit normals are
-/// shorter than 1; they never vanish, since neighbouring normals lie within 90° of each other
-/// on any height map).
-fn renormalise(image: &mut PlanarImage) {
-    let plane = image.texels();
-    for t in 0..plane {
-        let v = glam::Vec3::new(
-            image.data[t],
-            image.data[plane + t],
-            image.data[2 * plane + t],
-        )
-        .normalize();
-        for c in 0..3 {
-            image.data[c * plane + t] = v[c];
-        }
     }
 }
 
