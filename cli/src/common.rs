@@ -172,7 +172,6 @@ fn install_handler() -> anyhow::Result<()> {
     .context("cannot install the Ctrl-C handler")
 }
 
-/// `--detector NAME` of `prepare` and `eval-detector`.
 /// Two finite numbers separated by a comma (`A,B`); errors show `shape`, e.g. `ROW,COL`.
 pub fn parse_pair(text: &str, shape: &str) -> Result<(f64, f64), String> {
     let parts: Vec<&str> = text.split(',').map(str::trim).collect();
@@ -185,6 +184,7 @@ pub fn parse_pair(text: &str, shape: &str) -> Result<(f64, f64), String> {
     }
 }
 
+/// `--detector NAME` of `prepare` and `eval-detector`.
 pub fn parse_detector(name: &str) -> Result<DetectorKind, String> {
     name.parse()
         .map_err(|e: photomat_core::Error| e.to_string())

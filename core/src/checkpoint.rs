@@ -6,9 +6,9 @@
 //! the file holds no other tensor; otherwise nothing is modified and the error names the file
 //! and the first mismatching tensors. [`load_vars_allowing_absent`] does the same but lets a
 //! group of variables its caller names be absent all together (left as they are), for a
-//! training state saved without its optimiser ([`copy_checkpoint_where`]). [`save_vars_atomic`] writes a temporary file in the
-//! same folder and renames it over the target, so a Ctrl-C or a crash mid-save keeps the
-//! previous checkpoint intact.
+//! training state saved without its optimiser ([`copy_checkpoint_where`]).
+//! [`save_vars_atomic`] writes a temporary file in the same folder and renames it over the
+//! target, so a Ctrl-C or a crash mid-save keeps the previous checkpoint intact.
 
 use std::collections::HashMap;
 use std::path::Path;
