@@ -7,10 +7,11 @@
 //! nothing else running that costs nothing; with one other busy process on the 2-core build
 //! machine, a worker that the OS has descheduled keeps the caller spinning for a whole time
 //! slice at every op: 82 % of a photo capture's profile was those two spin loops, and the
-//! capture took 5–6× as long as with one candle thread. One candle thread was as fast as
-//! the default on the idle machine for every measured step (`docs/benchmarks.md`, "candle's
-//! spinning element-wise pool"), because the time is in GEMMs and fused kernels, which keep
-//! `RAYON_NUM_THREADS` threads, which [`fix_rayon_thread_count`] writes down once.
+//! capture took 5–6× as long as with one candle thread. On the idle machine one candle
+//! thread costs 0–7 % per step (`docs/benchmarks.md`, "candle's spinning element-wise pool"
+//! and "`train-gan` step time"), because the time is in GEMMs and fused kernels, which keep
+//! `RAYON_NUM_THREADS` threads, which [`fix_rayon_thread_count`] writes down once; a run that
+//! has the machine to itself may set `CANDLE_NUM_THREADS=2`.
 
 /// The variable rayon's global pool and candle's GEMMs read for their thread count.
 pub const RAYON_THREADS_VAR: &str = "RAYON_NUM_THREADS";
