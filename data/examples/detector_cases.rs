@@ -14,8 +14,9 @@ fn main() -> anyhow::Result<()> {
     let dataset = FlashDataset::open(&dir)?;
     let (robust, paper) = (RobustDetector::default(), PaperDetector::default());
     println!(
-        "photo,width,truth_row,truth_col,robust_err_pct,paper_err_pct,disagree_pct,robust_status,\
-         alpha,vignetting,beam,diffuse,specular,ambient,flash_share"
+        "photo,width,truth_row,truth_col,robust_row,robust_col,paper_row,paper_col,robust_err_pct,\
+         paper_err_pct,disagree_pct,robust_status,alpha,vignetting,beam,diffuse,specular,ambient,\
+         flash_share,robust_reason"
     );
     for (i, entry) in dataset.photos().iter().enumerate() {
         let Some([row, col]) = entry.truth_highlight_px else {
@@ -29,8 +30,12 @@ fn main() -> anyhow::Result<()> {
         let pct = |e: f64| 100.0 * e / w;
         let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
         println!(
-            "{},{w},{row:.2},{col:.2},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{}",
+            "{},{w},{row:.2},{col:.2},{:.2},{:.2},{:.2},{:.2},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},\"{}\"",
             entry.image,
+            r.row,
+            r.col,
+            p.row,
+            p.col,
             pct(r.error_px(row, col)),
             pct(p.error_px(row, col)),
             pct(r.error_px(p.row, p.col)),
@@ -42,6 +47,7 @@ fn main() -> anyhow::Result<()> {
             f(fit.map(|f| f.coefficients[1])),
             f(fit.map(|f| f.coefficients[2])),
             f(fit.map(|f| f.flash_share)),
+            r.reason.as_deref().unwrap_or("").replace('"', "'"),
         );
     }
     Ok(())
