@@ -55,6 +55,11 @@ STRICT_NOISE = 5e-6
 # Random roughness stays above this: α ≥ 0.0225 keeps the peak of D well resolved in float32
 # (the relative error of D grows like u/α near its peak) and far above principled's α floor.
 RANDOM_ROUGHNESS_MIN = 0.15
+# Blinn-Phong's cos^e θ_h moves by e·tan θ_h·δθ for an input rounding δθ: its condition number
+# grows with the exponent e = 2/α² − 2 (GGX's stays below ~4), so its random cases stay at
+# roughness ≥ 0.5 (e ≤ 30) for the float32 noise (gradients included) to stay below STRICT_NOISE. The low-roughness
+# behaviour is still covered by the tagged extreme cases.
+BLINN_RANDOM_ROUGHNESS_MIN = 0.5
 
 # Tolerances of `check` (regenerated vs committed references; README "Drift check"). The LLVM
 # backend may round differently on another CPU, by about a case's measured float32 noise.
@@ -182,9 +187,9 @@ def rgb(rnd, lo=0.0, hi=1.0):
     return v32([rnd.uniform(lo, hi) for _ in range(3)])
 
 
-def random_ggx_case(rnd, collocated):
+def random_ggx_case(rnd, collocated, roughness_min=RANDOM_ROUGHNESS_MIN):
     """Well-conditioned random case: normal tilted ≤ 60° with length in [0.5, 2], both directions
-    ≥ 0.05 above the normal's horizon, roughness ≥ RANDOM_ROUGHNESS_MIN."""
+    ≥ 0.05 above the normal's horizon, roughness ≥ roughness_min."""
     n = v32(scale(random_direction(rnd, Z, 0.5, 1.0), math.exp(rnd.uniform(-0.7, 0.7))))
     axis = normalize(n)
     while True:
@@ -195,7 +200,7 @@ def random_ggx_case(rnd, collocated):
     params = {
         "diffuse": rgb(rnd),
         "specular": rgb(rnd),
-        "roughness": [f32(rnd.uniform(RANDOM_ROUGHNESS_MIN, 1.0))],
+        "roughness": [f32(rnd.uniform(roughness_min, 1.0))],
         "normal": n,
     }
     tag = "random_collocated" if collocated else "random"
@@ -345,7 +350,7 @@ def extreme_aniso_cases():
 
 
 def params_of(model):
-    return {"ggx": GGX_PARAMS, "ggx_aniso": GGX_ANISO_PARAMS, "coated": COATED_PARAMS}[model]
+    return {"ggx": GGX_PARAMS, "blinn_phong": GGX_PARAMS, "ggx_aniso": GGX_ANISO_PARAMS, "coated": COATED_PARAMS}[model]
 
 
 def extreme_coated_cases():
@@ -402,7 +407,7 @@ def extreme_coated_cases():
 
 
 def lobes_of(model):
-    if model in ("ggx", "ggx_aniso"):
+    if model in ("ggx", "blinn_phong", "ggx_aniso"):
         return [("specular", "roughness")]  # ggx_aniso reads roughness_t and roughness_b
     return [("specular", "roughness"), ("specular2", "roughness2")]
 
@@ -506,6 +511,24 @@ def composed(model, cases, alpha_floor=None, grad_channel=None, variant=None):
             dist = mi.MicrofacetDistribution(mi.MicrofacetType.GGX, alpha)  # clamps α ≥ 1e-4 itself
         D = dist.eval(h)
         shadowing = (variant or {}).get("shadowing", "separable")
+        if model == "blinn_phong":
+            # Normalised Blinn-Phong (e + 2)/(2π)·cos^e θ_h with e = 2/α² − 2 (Walter et al.
+            # 2007, eq. 33) and the GGX floor on α; implicit masking, F = F0 (brdf-plugins'
+            # blinn_phong.rs). cos^e = exp(−e/2 · ln(1 + tan²θ_h)) with tan² from the local
+            # half vector's x, y (no 1 − cos² cancellation): `power(h.z, e)` in float32 is off
+            # by up to 7× near the peak of an α = 1e-4 lobe (e·ulp(1) ≈ 12). Dr.Jit has no
+            # log1p; this one is Goldberg 1991's `x·ln(u)/(u − 1)`, u = 1 + x, a different
+            # form from photomat's series, accurate to a few ulps.
+            alpha = dr.maximum(dr.square(inputs[rough]), 1e-4)
+            e = 2.0 / dr.square(alpha) - 2.0
+            # Masked lanes (h.z ≤ 0) only need a finite value; the floor never binds otherwise.
+            tan2 = (dr.square(h.x) + dr.square(h.y)) / dr.maximum(dr.square(h.z), 1e-12)
+            u = 1.0 + tan2
+            exact = u == 1.0
+            log1p = dr.select(exact, tan2, tan2 * dr.log(u) / dr.select(exact, 1.0, u - 1.0))
+            D = (e + 2.0) * (0.5 * dr.inv_pi) * dr.exp(-0.5 * e * log1p)
+            shadowing = "implicit"
+            variant = {"fresnel": "constant"}
         if shadowing == "separable":
             G = dist.G(wi, wo, h)
         elif shadowing == "correlated":
@@ -588,7 +611,7 @@ def reference_cases(model, cases, variant=None):
     names = params_of(model)
     comp, per_channel = composed_all(model, cases, variant)
     # No Mitsuba plugin for the variants and the anisotropic model: composed values only.
-    composed_only = bool(variant) or model == "ggx_aniso"
+    composed_only = bool(variant) or model in ("ggx_aniso", "blinn_phong")
     if composed_only:
         _, comp_cos_o, _ = composed(model, cases, variant=variant)
         plugin = [([comp[k][i] for k in range(3)], comp_cos_o[i]) for i in range(len(cases))]
@@ -652,9 +675,19 @@ def reference_cases(model, cases, variant=None):
 
 def brdf_inputs(model):
     rnd = random.Random(f"{SEED}-{model}")
-    make = {"ggx": random_ggx_case, "ggx_aniso": random_aniso_case, "coated": random_coated_case}[model]
+    make = {
+        "ggx": random_ggx_case,
+        "blinn_phong": lambda rnd, collocated: random_ggx_case(rnd, collocated, BLINN_RANDOM_ROUGHNESS_MIN),
+        "ggx_aniso": random_aniso_case,
+        "coated": random_coated_case,
+    }[model]
     cases = [make(rnd, collocated=(i % 4 == 0)) for i in range(N_RANDOM)]
-    cases += {"ggx": extreme_ggx_cases, "ggx_aniso": extreme_aniso_cases, "coated": extreme_coated_cases}[model]()
+    cases += {
+        "ggx": extreme_ggx_cases,
+        "blinn_phong": extreme_ggx_cases,
+        "ggx_aniso": extreme_aniso_cases,
+        "coated": extreme_coated_cases,
+    }[model]()
     return cases
 
 
@@ -673,14 +706,15 @@ def brdf_golden(model, cases, spec=None, variant=None):
         params=[{"name": n, "channels": ch} for n, ch in params],
         extra={
             "normal": "normalised inside the model; gradients are w.r.t. the un-normalised vector"
-            if model in ("ggx", "ggx_aniso")
+            if model in ("ggx", "blinn_phong", "ggx_aniso")
             else "fixed +z (wi, wo are in the local frame)",
             "alpha": "max(roughness², 1e-4)",
             "strict_noise": STRICT_NOISE,
             "noise": f"{NOISE_RUNS} runs, inputs moved by up to {NOISE_ULPS} float32 roundoffs",
-            "random_roughness_min": RANDOM_ROUGHNESS_MIN,
+            "random_roughness_min": BLINN_RANDOM_ROUGHNESS_MIN if model == "blinn_phong" else RANDOM_ROUGHNESS_MIN,
             "plugin_vs_composed_max_rel": report["plugin_vs_composed_max_rel"],
             **({"variant": variant, "source": "composed model only (Mitsuba has no plugin)"} if variant else {}),
+            **({"source": "composed in Dr.Jit (Mitsuba has no Blinn-Phong plugin)"} if model == "blinn_phong" else {}),
         },
     )
     return {"meta": meta, "cases": refs}
@@ -1161,6 +1195,7 @@ def main():
         for stem, spec, variant in GGX_VARIANTS:
             write(stem, brdf_golden("ggx", brdf_inputs("ggx"), spec, variant))
         write("ggx_aniso", brdf_golden("ggx_aniso", brdf_inputs("ggx_aniso")))
+        write("blinn_phong", brdf_golden("blinn_phong", brdf_inputs("blinn_phong")))
         write("height", height_golden(height_inputs()))
         for stem, model, size, highlight in RENDERS:
             write(stem, render_golden(stem, model, size, highlight, render_inputs(stem, model, size)))
@@ -1172,6 +1207,7 @@ def main():
     for stem, _, variant in GGX_VARIANTS:
         check_brdf("ggx", drift, stem, variant)
     check_brdf("ggx_aniso", drift)
+    check_brdf("blinn_phong", drift)
     check_height(drift)
     for stem, _, _, _ in RENDERS:
         check_render(stem, drift)

@@ -1,7 +1,8 @@
 //! # photomat-brdfs
 //!
 //! The built-in BRDF plugins, one file per model, file stem = registered name (Mitsuba 3's
-//! layout): [`lambert`], [`ggx`], [`ggx_aniso`], [`coated`] and the [`height`] adapter. Each file's header
+//! layout): [`lambert`], [`blinn_phong`], [`ggx`], [`ggx_aniso`], [`coated`] and the [`height`]
+//! adapter. Each file's header
 //! holds the model's parameter table; each file declares its plugin once with
 //! `photomat_core::register_brdf!`, and the maps several models share come from
 //! [`photomat_core::param::common`]. Adding a built-in is one new file here and nothing else:

@@ -1,5 +1,6 @@
-//! Reflectance lobes that models sum: Lambert diffuse and the GGX microfacet specular lobe (with
-//! its masking and Fresnel choices, `microfacet::{Masking, FresnelTerm}`).
+//! Reflectance lobes that models sum: Lambert diffuse, the GGX microfacet specular lobe (with
+//! its masking and Fresnel choices, `microfacet::{Masking, FresnelTerm}`) and the cheap
+//! Blinn-Phong lobe.
 //!
 //! Both return the lobe's `f·cos θ_o`, masked to exactly 0 below the horizon. The specular
 //! lobe is `D·F·G / (4 cos θ_i cos θ_o) · cos θ_o = D·F·G1(o)·(G1(i)/cos θ_i) / 4` (Walter et al.
@@ -14,8 +15,8 @@ use candle_core::Tensor;
 
 use crate::Result;
 use crate::microfacet::{
-    FresnelTerm, Masking, alpha_from_roughness, ggx_d, schlick, smith_correlated_over_4cos,
-    smith_g1, smith_g1_over_cos,
+    FresnelTerm, Masking, alpha_from_roughness, blinn_phong_d, ggx_d, schlick,
+    smith_correlated_over_4cos, smith_g1, smith_g1_over_cos,
 };
 use crate::shading::ShadingGeometry;
 
@@ -82,4 +83,20 @@ pub fn ggx_specular_with(
         FresnelTerm::Constant => f0.clone(),
     };
     ggx_lobe_masked(geometry, &fresnel, &alpha, masking)
+}
+
+/// Blinn-Phong specular, the cheap end of the specular lobes: normalised Blinn-Phong D with
+/// the exponent of `α = max(roughness², 1e-4)`, the implicit masking `G = cos θ_i cos θ_o` and
+/// `F = f0` at every angle, i.e. `f0 · D · cos θ_o / 4`, masked. `f0` (B|1, 3, H, W).
+pub fn blinn_phong_specular(
+    geometry: &ShadingGeometry,
+    f0: &Tensor,
+    roughness: &Tensor,
+) -> Result<Tensor> {
+    let alpha = alpha_from_roughness(roughness)?;
+    let d = blinn_phong_d(&geometry.cos_h, &geometry.sin2_h, &alpha)?;
+    let scalar = d
+        .broadcast_mul(&(&geometry.cos_o * 0.25)?)?
+        .broadcast_mul(&geometry.mask)?;
+    Ok(f0.broadcast_mul(&scalar)?)
 }

@@ -124,6 +124,29 @@ fn every_model_passes_the_white_furnace() {
                 &constant_maps(&[("diffuse", ONE), ("normal", UP)]),
                 wi,
             );
+            // Blinn-Phong with the implicit G gains energy at grazing incidence (as
+            // `ggx(shadowing=implicit)` does), so only normal incidence is bounded: there its
+            // albedo is the lobe's mean of cos 2θ_h ≤ 1.
+            let blinn_phong = albedo(
+                "blinn_phong",
+                &constant_maps(&[
+                    ("diffuse", Z),
+                    ("specular", ONE),
+                    ("roughness", rough),
+                    ("normal", UP),
+                ]),
+                wi,
+            );
+            if theta_deg == 0.0 {
+                for v in blinn_phong {
+                    assert!(
+                        v <= 1.0 + TOL,
+                        "blinn_phong r={r}: albedo {v} at normal incidence"
+                    );
+                    // mean cos 2θ_h ≈ 1 − 4/e = 0.984 for e = 2/α² − 2 = 245 at r = 0.3.
+                    assert!(r != 0.3 || v > 0.97, "blinn_phong r=0.3: albedo {v}");
+                }
+            }
             for (what, a) in [("ggx specular", specular_only), ("lambert", lambert)] {
                 for v in a {
                     assert!(
@@ -184,6 +207,55 @@ fn every_model_passes_the_white_furnace() {
                 }
             }
         }
+    }
+}
+
+#[test]
+fn blinn_phong_distribution_is_normalised_and_matches_the_closed_form() {
+    use photomat_core::microfacet::blinn_phong_d;
+    let column = |v: &[f64]| {
+        Tensor::new(v, &Device::Cpu)
+            .unwrap()
+            .reshape((1, 1, 1, v.len()))
+            .unwrap()
+    };
+    // Midpoint rule in θ_h on [0, π/2]: steps of 4e-6 rad resolve a lobe of width α ≥ 0.01.
+    const N: usize = 400_000;
+    let step = PI / 2.0 / N as f64;
+    let theta: Vec<f64> = (0..N).map(|i| (i as f64 + 0.5) * step).collect();
+    let cos: Vec<f64> = theta.iter().map(|t| t.cos()).collect();
+    let sin2: Vec<f64> = theta.iter().map(|t| t.sin().powi(2)).collect();
+    for alpha in [1.0, 0.5, 0.2, 0.05, 0.01] {
+        let d = values(
+            &blinn_phong_d(&column(&cos), &column(&sin2), &column(&vec![alpha; N])).unwrap(),
+        );
+        // ∫ D cos θ_h dω_h = 2π ∫ D cos θ sin θ dθ = 1.
+        let integral: f64 =
+            (0..N).map(|i| d[i] * cos[i] * theta[i].sin()).sum::<f64>() * 2.0 * PI * step;
+        assert!(
+            (integral - 1.0).abs() < 1e-6,
+            "α={alpha}: ∫ D cos = {integral}"
+        );
+        // The closed form (e + 2)/(2π)·cos^e θ_h, with f64 `powf` (its rounding e·ulp ≤ 4e-12
+        // for e ≤ 2·10⁴), on both sides of the ln(1 + x) branch switch at tan² = 0.01.
+        let e = 2.0 / (alpha * alpha) - 2.0;
+        for i in (0..N).step_by(997) {
+            let closed = (e + 2.0) / (2.0 * PI) * cos[i].powf(e);
+            let err = (d[i] - closed).abs() / closed.max(1e-300);
+            assert!(
+                closed < 1e-250 || err < 1e-9,
+                "α={alpha} θ={}: D {} vs {closed}",
+                theta[i],
+                d[i]
+            );
+        }
+        // At the peak D equals GGX's 1/(π α²), so a roughness map means the same in both.
+        let peak =
+            values(&blinn_phong_d(&column(&[1.0]), &column(&[0.0]), &column(&[alpha])).unwrap())[0];
+        assert!(
+            (peak * PI * alpha * alpha - 1.0).abs() < 1e-12,
+            "α={alpha}: peak {peak}"
+        );
     }
 }
 
