@@ -104,7 +104,7 @@ fn normalized(v: &[f64]) -> Vec<f64> {
     v.iter().map(|x| x / len).collect()
 }
 
-/// Random blinn_phong maps for an R×R grid, f64: albedos and glossiness in the given ranges,
+/// Random blinn_phong_gloss maps for an R×R grid, f64: albedos and glossiness in the given ranges,
 /// normals tilted by at most ≈ 27° (x, y ∈ [−½, ½], z = 1; normalised by the model).
 fn random_maps(rng: &mut Rng, size: usize, albedo: (f64, f64), gloss: (f64, f64)) -> MaterialMaps {
     let n = size * size;
@@ -146,7 +146,7 @@ fn reference_f_cos(wi: &[f64], wo: &[f64], n: &[f64], rd: f64, ks: f64, g: f64) 
 fn registry_lists_the_builtins_and_the_user_plugin_sorted() {
     assert_eq!(
         photomat_custom_brdf_example::registered_names().unwrap(),
-        ["blinn_phong"]
+        ["blinn_phong_gloss"]
     );
     let expected = expected_names();
     assert!(
@@ -163,50 +163,50 @@ fn registry_lists_the_builtins_and_the_user_plugin_sorted() {
 }
 
 #[test]
-fn blinn_phong_file_stem_equals_registered_name() {
+fn blinn_phong_gloss_file_stem_equals_registered_name() {
     photomat_core::testing::check_file_stems("photomat_custom_brdf_example").unwrap();
 }
 
 #[test]
-fn blinn_phong_passes_the_conformance_kit() {
-    check_model("blinn_phong").unwrap();
+fn blinn_phong_gloss_passes_the_conformance_kit() {
+    check_model("blinn_phong_gloss").unwrap();
 }
 
 #[test]
-fn height_blinn_phong_passes_the_conformance_kit() {
+fn height_blinn_phong_gloss_passes_the_conformance_kit() {
     // The built-in adapter differentiates through the user's model down to the height map;
     // a visible relief makes the normals depend strongly on the heights.
-    check_model("height(blinn_phong, scale=0.1)").unwrap();
+    check_model("height(blinn_phong_gloss, scale=0.1)").unwrap();
 }
 
 #[test]
-fn blinn_phong_channel_counts_and_height_adapter() {
-    let plain = model("blinn_phong");
-    assert_eq!(plain.name(), "blinn_phong");
+fn blinn_phong_gloss_channel_counts_and_height_adapter() {
+    let plain = model("blinn_phong_gloss");
+    assert_eq!(plain.name(), "blinn_phong_gloss");
     assert_eq!(plain.channels(), 10);
     let names: Vec<_> = plain.params().iter().map(|p| p.name).collect();
     assert_eq!(names, ["diffuse", "specular", "glossiness", "normal"]);
 
     // The built-in adapter wraps the user's model by name: normal (3) → height (1).
-    let bumped = model("height(blinn_phong)");
+    let bumped = model("height(blinn_phong_gloss)");
     assert_eq!(bumped.channels(), 8);
     let names: Vec<_> = bumped.params().iter().map(|p| p.name).collect();
     assert_eq!(names, ["diffuse", "specular", "glossiness", "height"]);
-    assert_eq!(bumped.name(), "height(blinn_phong, scale=0.02)");
+    assert_eq!(bumped.name(), "height(blinn_phong_gloss, scale=0.02)");
     assert_eq!(model(&bumped.name()).name(), bumped.name());
 
     // Decoding raw network output goes through the specs: 10 channels in, four maps out.
     let raw = Tensor::zeros((2, 10, 4, 4), DType::F32, &Device::Cpu).unwrap();
     let maps = plain.decode(&raw).unwrap();
-    maps.validate("blinn_phong", plain.params()).unwrap();
+    maps.validate("blinn_phong_gloss", plain.params()).unwrap();
     // tanh(0) = 0 decodes to the middle of the linear range: g = ½, e = 2^7.
     let g = values(maps.get("glossiness").unwrap());
     assert!(g.iter().all(|&v| (v - 0.5).abs() < 1e-6), "{g:?}");
 }
 
 #[test]
-fn blinn_phong_matches_the_documented_formula() {
-    let brdf = model("blinn_phong");
+fn blinn_phong_gloss_matches_the_documented_formula() {
+    let brdf = model("blinn_phong_gloss");
     let size = 16;
     let mut rng = Rng(7);
     let wi: Vec<Vec<f64>> = (0..size * size)
@@ -242,11 +242,11 @@ fn blinn_phong_matches_the_documented_formula() {
 }
 
 #[test]
-fn blinn_phong_white_furnace_le_one_and_normalised() {
+fn blinn_phong_gloss_white_furnace_le_one_and_normalised() {
     // Directional albedo ∫ f·cosθ_o dω_o by the midpoint rule over (cosθ_o, φ_o), for a white
     // specular lobe (diffuse 0) and a white diffuse one (specular 0). The (e + 2)/(8π) factor
     // keeps the lobe ≤ 1 at every angle and ≈ 1 at normal incidence for narrow lobes.
-    let brdf = model("blinn_phong");
+    let brdf = model("blinn_phong_gloss");
     let (n_mu, n_phi) = (400, 200);
     let mut wo = Vec::with_capacity(n_mu * n_phi);
     for i in 0..n_mu {
@@ -307,8 +307,8 @@ fn blinn_phong_white_furnace_le_one_and_normalised() {
 }
 
 #[test]
-fn blinn_phong_render_puts_the_highlight_under_the_flash() {
-    let brdf = model("blinn_phong");
+fn blinn_phong_gloss_render_puts_the_highlight_under_the_flash() {
+    let brdf = model("blinn_phong_gloss");
     let size = 64;
     let constant = |v: &[f32]| {
         Tensor::new(v, &Device::Cpu)
@@ -374,9 +374,9 @@ fn photomat_custom(args: &[&str]) -> Output {
 }
 
 #[test]
-fn photomat_custom_brdfs_lists_blinn_phong() {
+fn photomat_custom_brdfs_lists_blinn_phong_gloss() {
     let text = String::from_utf8(photomat_custom(&["brdfs"]).stdout).unwrap();
-    assert!(text.contains("blinn_phong"), "{text}");
+    assert!(text.contains("blinn_phong_gloss"), "{text}");
     assert!(text.contains("glossiness"), "{text}");
 
     // The binary's registry holds exactly the built-ins plus the user's model, with n = 10.
@@ -385,14 +385,17 @@ fn photomat_custom_brdfs_lists_blinn_phong() {
     let models = json["models"].as_array().expect("a list of models");
     let names: Vec<_> = models.iter().map(|m| m["name"].as_str().unwrap()).collect();
     assert_eq!(names, expected_names());
-    let blinn = models.iter().find(|m| m["name"] == "blinn_phong").unwrap();
+    let blinn = models
+        .iter()
+        .find(|m| m["name"] == "blinn_phong_gloss")
+        .unwrap();
     assert_eq!(blinn["channels"], 10, "{blinn}");
 }
 
 #[test]
-fn photomat_custom_renders_saved_blinn_phong_maps() {
+fn photomat_custom_renders_saved_blinn_phong_gloss_maps() {
     // Maps saved through the folder API, as a user's estimator would write them.
-    let brdf = model("blinn_phong");
+    let brdf = model("blinn_phong_gloss");
     let size = 32;
     // A flat plane with a faint diffuse texture and a uniform narrow lobe (e = 2^8.2), so
     // the brightest pixel is the one under the flash and the peak (≈ 0.8) is not clipped.
@@ -422,13 +425,13 @@ fn photomat_custom_renders_saved_blinn_phong_maps() {
         "--out",
     ];
     let stdout = photomat_custom(&[&args[..], &[path_str(&out)]].concat()).stdout;
-    assert!(String::from_utf8_lossy(&stdout).contains("blinn_phong"));
+    assert!(String::from_utf8_lossy(&stdout).contains("blinn_phong_gloss"));
 
     // The PNG is the library render of the loaded material, up to 8-bit quantisation.
     let (png, _) = read_png(&out).unwrap();
     assert_eq!((png.channels, png.height, png.width), (3, size, size));
     let loaded = load_maps(&folder, None).unwrap();
-    assert_eq!(loaded.brdf.name(), "blinn_phong");
+    assert_eq!(loaded.brdf.name(), "blinn_phong_gloss");
     let expected = render(
         loaded.brdf.as_ref(),
         &loaded.maps,

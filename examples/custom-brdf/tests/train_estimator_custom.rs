@@ -1,7 +1,7 @@
-//! A user plugin trains like a built-in one: `train-estimator --brdf blinn_phong` through
+//! A user plugin trains like a built-in one: `train-estimator --brdf blinn_phong_gloss` through
 //! `photomat_cli::run_with_output` in a crate that links the plugin (the same code path as
 //! the `photomat-custom` binary) gives an estimator whose head has the plugin's 10 channels
-//! and which loads back by name, adapters included (`height(blinn_phong)`, 8 channels).
+//! and which loads back by name, adapters included (`height(blinn_phong_gloss)`, 8 channels).
 
 use photomat_brdfs as _;
 use photomat_custom_brdf_example as _;
@@ -23,7 +23,7 @@ fn train_estimator_works_for_a_user_plugin() -> Result<(), Box<dyn std::error::E
         ..Default::default()
     };
     GanModel::new(&cfg, 1, &Device::Cpu)?.save(&gan_dir, serde_json::Value::Null)?;
-    for (spec, channels) in [("blinn_phong", 10), ("height(blinn_phong)", 8)] {
+    for (spec, channels) in [("blinn_phong_gloss", 10), ("height(blinn_phong_gloss)", 8)] {
         let run = dir.path().join(spec.replace(['(', ')'], "_"));
         let mut out = Vec::new();
         photomat_cli::run_with_output(

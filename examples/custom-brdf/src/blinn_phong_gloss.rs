@@ -1,5 +1,7 @@
-//! `blinn_phong`: Lambert diffuse + energy-normalised Blinn–Phong specular, registered from a
-//! user's crate without touching photomat's own crates.
+//! `blinn_phong_gloss`: Lambert diffuse + energy-normalised Blinn–Phong specular, registered from a
+//! user's crate without touching photomat's own crates. photomat's built-in `blinn_phong` is the
+//! same lobe on `ggx`'s roughness map; this one shows a model that brings a map of its own
+//! (glossiness) and a name that must not collide with a built-in's.
 //!
 //! `f = ρ_d/π + k_s·(e + 2)/(8π)·(n·h)^e` with `h = normalize(wi + wo)`.
 //! The factor is the microfacet form of Blinn's lobe (Blinn 1977, "Models of light reflection
@@ -21,8 +23,8 @@
 //! | `glossiness` | 1  | [0, 1] | linear   | linear PNG  | e = 2: broad lobe, peak 1/(2π) | e = 8192: sharp lobe, peak ≈ 326 |
 //! | `normal`     | 3  | unit   | normal   | 0.5·n + 0.5 | +z: flat                       | grazing tilt                     |
 //!
-//! n = 10; with the built-in height adapter, `height(blinn_phong)` has n = 8.
-//! Usage: `photomat-custom render --maps DIR --brdf blinn_phong --light 0.1,0.1 --out img.png`.
+//! n = 10; with the built-in height adapter, `height(blinn_phong_gloss)` has n = 8.
+//! Usage: `photomat-custom render --maps DIR --brdf blinn_phong_gloss --light 0.1,0.1 --out img.png`.
 
 use std::f64::consts::{LN_2, PI};
 
@@ -72,7 +74,7 @@ pub fn exponent(glossiness: &Tensor) -> Result<Tensor> {
     )
 }
 
-/// Floor of n·h before its logarithm (see `blinn_phong_specular`): any positive value far below
+/// Floor of n·h before its logarithm (see `blinn_phong_gloss_specular`): any positive value far below
 /// the cosines of unmasked texels works; 1e-7 ≈ f32 machine epsilon.
 const COS_H_MIN: f64 = 1e-7;
 
@@ -80,7 +82,7 @@ const COS_H_MIN: f64 = 1e-7;
 ///
 /// # Shapes
 /// `specular` (B|1, 3, H|1, W|1), `glossiness` (B|1, 1, H|1, W|1), result (B, 3, H, W).
-pub fn blinn_phong_specular(
+pub fn blinn_phong_gloss_specular(
     geometry: &ShadingGeometry,
     specular: &Tensor,
     glossiness: &Tensor,
@@ -108,13 +110,13 @@ impl Reflectance for BlinnPhong {
         let geometry = ShadingGeometry::new(wi, wo, maps.get("normal")?)?;
         let diffuse = lambert(&geometry, maps.get("diffuse")?)?;
         let specular =
-            blinn_phong_specular(&geometry, maps.get("specular")?, maps.get("glossiness")?)?;
+            blinn_phong_gloss_specular(&geometry, maps.get("specular")?, maps.get("glossiness")?)?;
         Ok((diffuse + specular)?)
     }
 }
 
 register_brdf! {
-    name: "blinn_phong",
+    name: "blinn_phong_gloss",
     summary: "Lambert + energy-normalised Blinn-Phong (e+2)/(8π)·(n·h)^e, e = 2^(1+12·glossiness)",
     params: &[DIFFUSE, SPECULAR_KS, GLOSSINESS, NORMAL],
     model: |_| Ok(BlinnPhong),
