@@ -28,8 +28,14 @@
 //! angles under which each texel saw the flash. [`relight`] renders the fitted maps under
 //! new flash positions ([`new_flash_positions`]), which a single photo never showed.
 //!
-//! Not yet: the generator's prior (inverting M∘G, then decoding with E, before this
-//! refinement), camera tilt, and fitted vignetting and ambient terms.
+//! With a trained model folder the maps do not start constant: [`capture_with_prior`] first
+//! inverts the generator to the photo and decodes what it finds with the estimator
+//! ([`prior`]), then refines those maps by the same loss, optionally held near them by an
+//! anchor term `μ · mean |θ − θ₀|`.
+//!
+//! Not yet: camera tilt, and fitted vignetting and ambient terms.
+
+pub mod prior;
 
 use std::path::Path;
 use std::time::Instant;
@@ -38,13 +44,15 @@ use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor, Var};
 use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
-use photomat_core::render::render_radiance_with;
+use photomat_core::render::{DISPLAY_GAMMA, render_radiance_with};
 use photomat_core::sheet::grid;
 use photomat_core::{Brdf, FlashGeometry, Highlight, MaterialMaps, encode_display};
 use photomat_data::dataset::photo::{Framing, prepare_photo};
 use photomat_data::highlight::{DetectionStatus, DetectorKind};
 use photomat_train::{Adam, AdamConfig};
 use serde::Serialize;
+
+pub use prior::{GanPrior, Inversion, PriorOptions};
 
 /// Smallest and largest side of a capture: below 16 texels there is no highlight to fit,
 /// above 2048 one step's render and gradients exceed a few GB.
@@ -101,6 +109,11 @@ pub struct CaptureOptions {
     /// Field of view across the photo's longer side, in degrees ([`DEFAULT_FOV_DEGREES`]);
     /// with the camera straight down it sets the square's side ([`square_side`]).
     pub fov_degrees: f64,
+    /// Weight μ of the anchor `mean |θ − θ₀|` that holds the refined raw maps near the
+    /// prior's; no effect without a prior. Default 0.05: on simulated photos it relit better
+    /// than 0 on two of three families tried, and better on their mean (docs/benchmarks.md,
+    /// "`photomat capture` with the generator prior").
+    pub anchor: f64,
 }
 
 impl Default for CaptureOptions {
@@ -112,6 +125,7 @@ impl Default for CaptureOptions {
             smoothness: 0.002,
             highlight: None,
             fov_degrees: DEFAULT_FOV_DEGREES,
+            anchor: 0.05,
         }
     }
 }
@@ -135,10 +149,23 @@ pub struct Capture {
     pub side: f64,
     /// The field of view it was computed from, in degrees.
     pub fov_degrees: f64,
-    /// Loss after every step.
+    /// Loss after every refinement step.
     pub losses: Vec<f64>,
-    /// Wall seconds of the fit.
+    /// Wall seconds of the refinement.
     pub seconds: f64,
+    /// The generator prior, when one was used.
+    pub prior: Option<PriorUsed>,
+}
+
+/// What the generator prior of a capture did.
+#[derive(Clone)]
+pub struct PriorUsed {
+    /// The model folder.
+    pub model: String,
+    /// The inversion's result, E's maps included.
+    pub inversion: Inversion,
+    /// E's maps of the inverted material, before refinement (1, C, N, N per map).
+    pub maps: MaterialMaps,
 }
 
 /// The highlight a capture used.
@@ -153,12 +180,26 @@ pub struct HighlightUsed {
 }
 
 /// Fits maps of `brdf` to the flash photo `bytes` (a JPEG or PNG file's content; `name` is
-/// used in errors). `progress(step, loss)` is called after every step.
+/// used in errors) from constant maps. `progress(step, loss)` is called after every step.
 pub fn capture(
     bytes: &[u8],
     name: &str,
     brdf: &Brdf,
     options: &CaptureOptions,
+    progress: &mut dyn FnMut(usize, f64),
+) -> anyhow::Result<Capture> {
+    capture_with_prior(bytes, name, brdf, options, None, progress)
+}
+
+/// [`capture`], starting from the maps the generator prior finds when `prior` is given
+/// (module docs). `progress(step, loss)` counts the inversion's steps first, then the
+/// refinement's.
+pub fn capture_with_prior(
+    bytes: &[u8],
+    name: &str,
+    brdf: &Brdf,
+    options: &CaptureOptions,
+    prior: Option<(&GanPrior, &PriorOptions)>,
     progress: &mut dyn FnMut(usize, f64),
 ) -> anyhow::Result<Capture> {
     let (lo, hi) = SIZE_RANGE;
@@ -209,8 +250,34 @@ pub fn capture(
     let geometry = FlashGeometry::with_side(&[light], n, side, DType::F32, &device)?;
     let texel = side / n as f64;
 
-    let raw = Var::zeros((1, brdf.channels(), n, n), DType::F32, &device)?;
-    let log_gain = Var::zeros(1, DType::F32, &device)?;
+    let (start_raw, start_log_gain, prior_used) = match prior {
+        None => (
+            Tensor::zeros((1, brdf.channels(), n, n), DType::F32, &device)?,
+            0.0,
+            None,
+        ),
+        Some((prior, prior_options)) => {
+            let inversion = prior
+                .invert(&photo, &geometry.omega, prior_options, progress)
+                .with_context(|| format!("{name}: generator prior"))?;
+            let maps = brdf
+                .decode(&inversion.raw)?
+                .with_texel_size(Some(texel))
+                .map_tensors(|t| Ok(t.detach()))?;
+            // A display gain d is a radiance gain d^γ under the display gamma.
+            let log_gain = DISPLAY_GAMMA * inversion.display_gain.ln();
+            let raw = inversion.raw.clone();
+            let used = PriorUsed {
+                model: prior.dir().to_string(),
+                inversion,
+                maps,
+            };
+            (raw, log_gain, Some(used))
+        }
+    };
+    let offset = prior_used.as_ref().map_or(0, |p| p.inversion.losses.len());
+    let raw = Var::from_tensor(&start_raw)?;
+    let log_gain = Var::from_tensor(&Tensor::new(&[start_log_gain as f32], &device)?)?;
     let mut adam = Adam::new(
         vec![
             ("raw".into(), raw.clone()),
@@ -234,11 +301,14 @@ pub fn capture(
     for step in 0..options.steps {
         let (_, predicted) = predict(raw.as_tensor(), log_gain.as_tensor())?;
         let data = (predicted - &photo)?.abs()?.mean_all()?;
-        let loss = if options.smoothness > 0.0 {
-            (data + (total_variation(raw.as_tensor())? * options.smoothness)?)?
-        } else {
-            data
-        };
+        let mut loss = data;
+        if options.smoothness > 0.0 {
+            loss = (loss + (total_variation(raw.as_tensor())? * options.smoothness)?)?;
+        }
+        if options.anchor > 0.0 && prior_used.is_some() {
+            let drift = (raw.as_tensor() - &start_raw)?.abs()?.mean_all()?;
+            loss = (loss + (drift * options.anchor)?)?;
+        }
         let value = loss.to_scalar::<f32>()? as f64;
         if !value.is_finite() {
             bail!(
@@ -248,7 +318,7 @@ pub fn capture(
         }
         adam.step(&loss.backward()?)?;
         losses.push(value);
-        progress(step + 1, value);
+        progress(offset + step + 1, value);
     }
     let (maps, render) = predict(raw.as_tensor(), log_gain.as_tensor())?;
     let gain = log_gain.as_tensor().exp()?.to_vec1::<f32>()?[0] as f64;
@@ -263,6 +333,7 @@ pub fn capture(
         fov_degrees: options.fov_degrees,
         losses,
         seconds: start.elapsed().as_secs_f64(),
+        prior: prior_used,
     })
 }
 
@@ -297,10 +368,40 @@ struct CaptureRecord<'a> {
     loss_last: Option<f64>,
     l1_encoded: f64,
     seconds: f64,
+    prior: Option<PriorRecord>,
+}
+
+/// What `capture.json` records of the generator prior.
+#[derive(Debug, Serialize)]
+struct PriorRecord {
+    model: String,
+    steps: usize,
+    loss_first: Option<f64>,
+    loss_last: Option<f64>,
+    /// L1 of E's maps rendered under the photo's flash, before refinement, encoded domain.
+    l1_encoded_before_refinement: f64,
+    display_gain: f64,
+    seconds: f64,
+}
+
+/// The photo's flash render of `maps` with the gain `gain`, display values (1, 3, N, N).
+fn render_under_photo_flash(
+    capture: &Capture,
+    maps: &MaterialMaps,
+    gain: f64,
+) -> anyhow::Result<Tensor> {
+    let (_, _, n, _) = capture.photo.dims4()?;
+    let (row, col) = capture.highlight.pixel;
+    let light = Highlight::from_pixel_on(row, col, n, capture.side);
+    let geometry = FlashGeometry::with_side(&[light], n, capture.side, DType::F32, &Device::Cpu)?;
+    let radiance = render_radiance_with(capture.brdf.as_ref(), maps, &geometry)?;
+    Ok(encode_display(&(radiance * gain)?)?)
 }
 
 /// Writes `out/material/` (the maps: PNG + EXR + material.json), `out/sheet.png` (photo |
-/// re-render | ×4 absolute error), `out/relit.png` (the maps under the eight
+/// re-render | ×4 absolute error; with a prior, M's relighting of the inverted material and
+/// the render of E's maps before refinement come between the photo and the re-render),
+/// `out/relit.png` (the maps under the eight
 /// [`new_flash_positions`], in a row) and `out/capture.json`.
 pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create '{}'", out.display()))?;
@@ -313,14 +414,37 @@ pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
     let error = (&capture.render - &capture.photo)?.abs()?;
     let l1 = error.mean_all()?.to_scalar::<f32>()? as f64;
     // ×4: errors of a few % of the range must show.
-    let row = [
-        &capture.photo,
-        &capture.render,
-        &(error * 4.0)?.clamp(0.0, 1.0)?,
-    ]
-    .iter()
-    .map(|t| PlanarImage::from_tensor(&t.squeeze(0)?))
-    .collect::<photomat_core::Result<Vec<_>>>()?;
+    let mut panels = vec![capture.photo.clone()];
+    let mut prior_record = None;
+    if let Some(prior) = &capture.prior {
+        let inversion = &prior.inversion;
+        let before = render_under_photo_flash(
+            capture,
+            &prior.maps,
+            inversion.display_gain.powf(DISPLAY_GAMMA),
+        )?;
+        let l1_before = (&before - &capture.photo)?
+            .abs()?
+            .mean_all()?
+            .to_scalar::<f32>()? as f64;
+        panels.push(inversion.relit.clone());
+        panels.push(before);
+        prior_record = Some(PriorRecord {
+            model: prior.model.clone(),
+            steps: inversion.losses.len(),
+            loss_first: inversion.losses.first().copied(),
+            loss_last: inversion.losses.last().copied(),
+            l1_encoded_before_refinement: l1_before,
+            display_gain: inversion.display_gain,
+            seconds: inversion.seconds,
+        });
+    }
+    panels.push(capture.render.clone());
+    panels.push((error * 4.0)?.clamp(0.0, 1.0)?);
+    let row = panels
+        .iter()
+        .map(|t| PlanarImage::from_tensor(&t.squeeze(0)?))
+        .collect::<photomat_core::Result<Vec<_>>>()?;
     write_png(&out.join("sheet.png"), &grid(&[row], 0.0)?, PngBits::Eight)?;
     let relit = relight(capture, &new_flash_positions(capture.side))?.clamp(0.0, 1.0)?;
     let relit = PlanarImage::batch_from_tensor(&relit)?;
@@ -343,6 +467,7 @@ pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
         loss_last: capture.losses.last().copied(),
         l1_encoded: l1,
         seconds: capture.seconds,
+        prior: prior_record,
     };
     write_atomic(
         &out.join("capture.json"),

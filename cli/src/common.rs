@@ -1,14 +1,49 @@
 //! What several commands share and no library owns: the progress-bar style, the stop flag
 //! of the training commands (SIGINT, SIGTERM, SIGHUP) and their exit status, argument
-//! parsers used by more than one command, the orbit lights of `--orbit N --radius R`, and the shortest decimal form of f32 constants.
+//! parsers used by more than one command, the orbit lights of `--orbit N --radius R`, the
+//! model folder a command uses by default (`--model`, `$PHOTOMAT_MODEL`, the bundled one), and
+//! the shortest decimal form of f32 constants.
 
 use std::sync::atomic::{AtomicBool, AtomicI32, Ordering};
 use std::sync::{Arc, OnceLock};
 
-use anyhow::Context;
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, bail};
 use indicatif::{ProgressBar, ProgressStyle};
 use photomat_core::LightSet;
 use photomat_data::highlight::DetectorKind;
+use photomat_estimator::sample::missing_model_file;
+
+/// Environment variable naming the default model folder.
+pub const MODEL_ENV: &str = "PHOTOMAT_MODEL";
+
+/// The bundled model folder of this source tree.
+pub fn bundled_model_dir() -> PathBuf {
+    let cli = Path::new(env!("CARGO_MANIFEST_DIR"));
+    // The workspace root is the CLI crate's parent folder.
+    cli.parent().unwrap_or(cli).join("models").join("demo")
+}
+
+/// The model folder to use: `--model`, else `$PHOTOMAT_MODEL`, else the bundled one; an error
+/// naming the path tried and how to train a model if it holds none.
+pub fn model_dir(arg: Option<&Path>) -> anyhow::Result<PathBuf> {
+    let (dir, source) = match (arg, std::env::var_os(MODEL_ENV)) {
+        (Some(dir), _) => (dir.to_path_buf(), "--model"),
+        (None, Some(env)) => (PathBuf::from(env), "$PHOTOMAT_MODEL"),
+        (None, None) => (bundled_model_dir(), "the bundled model folder"),
+    };
+    if let Some(missing) = missing_model_file(&dir) {
+        bail!(
+            "no trained model in '{}' ({source}): {missing} is missing. Train one with \
+             `photomat train-gan --data DATASET --out RUN`, then `photomat train-estimator \
+             --gan RUN --brdf 'height(ggx)' --out MODEL`, and pass --model MODEL (or set \
+             ${MODEL_ENV})",
+            dir.display()
+        );
+    }
+    Ok(dir)
+}
 
 /// A progress bar of `len` units on stderr; `template` is indicatif's, with `{bar:W}`.
 pub fn progress_bar(len: u64, template: &str) -> ProgressBar {

@@ -619,4 +619,43 @@ fn cli_capture_takes_the_field_of_view_and_refuses_one_out_of_range() {
         "200",
     ]);
     assert!(err.contains("'200'") && err.contains("5 … 150"), "{err}");
+
+    // --model: the bundled folder has no `ggx` estimator, so the fit starts from constant
+    // maps and says so; it has a `lambert` one, whose prior capture.json records.
+    let bundled = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/demo");
+    let capture_with_model = |brdf: &str, out: &std::path::Path| {
+        photomat(&[
+            "capture",
+            path_str(&photo),
+            "--brdf",
+            brdf,
+            "--out",
+            path_str(out),
+            "--size",
+            "32",
+            "--steps",
+            "2",
+            "--prior-steps",
+            "3",
+            "--model",
+            path_str(&bundled),
+        ])
+        .unwrap()
+    };
+    let no_estimator = dir.path().join("ggx-prior");
+    let printed = capture_with_model("ggx", &no_estimator);
+    assert!(
+        printed.contains("has no estimator for ggx: fitting from constant maps"),
+        "{printed}"
+    );
+    let record: Value =
+        serde_json::from_slice(&std::fs::read(no_estimator.join("capture.json")).unwrap()).unwrap();
+    assert!(record["prior"].is_null(), "{record}");
+    let with_prior = dir.path().join("lambert-prior");
+    let printed = capture_with_model("lambert", &with_prior);
+    assert!(printed.contains("generator prior from"), "{printed}");
+    let record: Value =
+        serde_json::from_slice(&std::fs::read(with_prior.join("capture.json")).unwrap()).unwrap();
+    assert_eq!(record["prior"]["steps"], 3, "{record}");
+    assert_eq!(record["steps"], 2, "{record}");
 }

@@ -1,18 +1,25 @@
 //! `photomat capture PHOTO --brdf SPEC --out DIR [--size 256] [--steps 400] [--fov 67]
-//! [--highlight ROW,COL]`: one phone flash photo → maps of a named BRDF model. The fit is the
-//! library's `photomat_capture::capture` (docs/capture.md); this command reads the file, locks
-//! DIR, shows progress and writes DIR/material/ (loadable by every command), DIR/sheet.png
-//! (photo | re-render | ×4 error), DIR/relit.png (the maps under eight new flash positions) and
-//! DIR/capture.json (geometry, highlight, gain, losses, timings).
+//! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]`: one
+//! phone flash photo → maps of a named BRDF model. The fit is the library's
+//! `photomat_capture::capture_with_prior` (docs/capture.md): from constant maps, or, with
+//! `--prior` or `--model`, from the model folder's generator prior when the folder has an
+//! estimator for SPEC. This command
+//! reads the file, locks DIR, shows progress and writes DIR/material/ (loadable by every
+//! command), DIR/sheet.png (photo | [M's relighting | E's maps] | re-render | ×4 error),
+//! DIR/relit.png (the maps under eight new flash positions) and DIR/capture.json (geometry,
+//! highlight, gain, losses, timings).
 
 use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::Context;
-use photomat_capture::{CaptureOptions, FOV_RANGE, capture, write_capture};
+use candle_core::Device;
+use photomat_capture::{
+    CaptureOptions, FOV_RANGE, GanPrior, PriorOptions, capture_with_prior, write_capture,
+};
 use photomat_core::{FolderLock, lookup};
 
-use crate::common::{parse_pair, steps_bar};
+use crate::common::{model_dir, parse_pair, steps_bar};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -48,6 +55,37 @@ pub struct Args {
     /// 26 mm equivalent; 90 is the geometry of the training data, docs/conventions.md].
     #[arg(long, value_name = "DEG", value_parser = parse_fov)]
     pub fov: Option<f64>,
+
+    /// Start the fit from the generator prior of the default model folder ($PHOTOMAT_MODEL,
+    /// else the bundled models/demo): the generator inverted to the photo, its material
+    /// decoded by the estimator for --brdf. Off by default: on simulated photos of the eight
+    /// families the bundled model's prior relit better on five and worse on three (fabric,
+    /// paint, tiles), worse on average, at 3–4× the time (docs/benchmarks.md).
+    #[arg(long)]
+    pub prior: bool,
+
+    /// Model folder whose generator prior starts the fit (its GAN, and an estimator for
+    /// --brdf at the root or under estimators/); implies --prior. Without an estimator for
+    /// --brdf the fit starts from constant maps, with a note.
+    #[arg(long, value_name = "DIR")]
+    pub model: Option<PathBuf>,
+
+    /// Steps of the generator inversion before the refinement [default: 100].
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=100_000))]
+    pub prior_steps: Option<u32>,
+
+    /// Weight of the term that holds the refined raw maps near the prior's (0: none)
+    /// [default: 0.05].
+    #[arg(long, value_name = "MU", value_parser = parse_weight)]
+    pub anchor: Option<f64>,
+}
+
+/// A finite weight ≥ 0.
+fn parse_weight(text: &str) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("'{text}' is not a weight ≥ 0")),
+    }
 }
 
 /// A field of view within [`FOV_RANGE`] degrees.
@@ -76,15 +114,56 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         steps: args.steps.map_or(defaults.steps, |k| k as usize),
         highlight: args.highlight,
         fov_degrees: args.fov.unwrap_or(defaults.fov_degrees),
+        anchor: args.anchor.unwrap_or(defaults.anchor),
         ..defaults
     };
+    let prior_options = PriorOptions {
+        steps: args
+            .prior_steps
+            .map_or(PriorOptions::default().steps, |k| k as usize),
+        ..PriorOptions::default()
+    };
+    let prior = if !(args.prior || args.model.is_some()) {
+        None
+    } else {
+        let dir = model_dir(args.model.as_deref())?;
+        let prior = GanPrior::open(&dir, &brdf, &Device::Cpu)?;
+        if prior.is_none() {
+            writeln!(
+                out,
+                "note: '{}' has no estimator for {}: fitting from constant maps (train one \
+                 with `photomat train-estimator --gan {0} --brdf '{1}' --out {0}/estimators/NAME`)",
+                dir.display(),
+                brdf.name()
+            )?;
+        }
+        prior
+    };
     let _lock = FolderLock::acquire(&args.out, "photomat capture")?;
-    let bar = steps_bar(options.steps as u64, 0);
+    let prior_steps = if prior.is_some() {
+        prior_options.steps
+    } else {
+        0
+    };
+    let bar = steps_bar((prior_steps + options.steps) as u64, 0);
     let name = args.photo.display().to_string();
-    let result = capture(&bytes, &name, &brdf, &options, &mut |step, loss| {
-        bar.set_position(step as u64);
-        bar.set_message(format!("loss {loss:.4}"));
-    });
+    let prior_arg = prior.as_ref().map(|p| (p, &prior_options));
+    let result = capture_with_prior(
+        &bytes,
+        &name,
+        &brdf,
+        &options,
+        prior_arg,
+        &mut |step, loss| {
+            let phase = if step <= prior_steps {
+                "inversion"
+            } else {
+                "refinement"
+            };
+            bar.set_position(step as u64);
+            bar.set_message(format!("{phase} loss {loss:.4}"));
+        },
+    );
     bar.finish_and_clear();
     let result = result?;
     write_capture(&result, &args.out)?;
@@ -106,12 +185,29 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         result.losses.len(),
         result.seconds
     )?;
+    if let Some(prior) = &result.prior {
+        let inversion = &prior.inversion;
+        writeln!(
+            out,
+            "  generator prior from {}: inversion loss {:.4} → {:.4} in {} steps, {:.1} s",
+            prior.model,
+            inversion.losses.first().copied().unwrap_or(f64::NAN),
+            inversion.losses.last().copied().unwrap_or(f64::NAN),
+            inversion.losses.len(),
+            inversion.seconds
+        )?;
+    }
     let dir = args.out.display();
     writeln!(
         out,
         "  {dir}/material/  the maps (photomat render --maps {dir}/material --orbit 8)"
     )?;
-    writeln!(out, "  {dir}/sheet.png  photo | re-render | ×4 error")?;
+    let panels = if result.prior.is_some() {
+        "photo | M's relighting | E's maps | re-render | ×4 error"
+    } else {
+        "photo | re-render | ×4 error"
+    };
+    writeln!(out, "  {dir}/sheet.png  {panels}")?;
     writeln!(
         out,
         "  {dir}/relit.png  the maps under eight new flash positions"

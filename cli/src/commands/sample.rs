@@ -15,20 +15,10 @@ use anyhow::bail;
 use candle_core::Device;
 use photomat_estimator::sample::{
     BrdfChoice, CONTACT_SHEET_FILE, DEFAULT_TOLERANCE, SHEET_MAX_ROWS, SUMMARY_FILE, SampleEvent,
-    SampleOptions, SampleSummary, Sampler, missing_model_file,
+    SampleOptions, SampleSummary, Sampler,
 };
 
-use crate::common::progress_bar;
-
-/// Environment variable naming the default model folder.
-pub const MODEL_ENV: &str = "PHOTOMAT_MODEL";
-
-/// The bundled model folder of this source tree.
-pub fn bundled_model_dir() -> PathBuf {
-    let cli = Path::new(env!("CARGO_MANIFEST_DIR"));
-    // The workspace root is the CLI crate's parent folder.
-    cli.parent().unwrap_or(cli).join("models").join("demo")
-}
+use crate::common::{model_dir, progress_bar};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -117,26 +107,6 @@ pub struct Args {
     /// above the material's own before simplifying. Relative (0.1 = 10 %).
     #[arg(long, value_name = "T", default_value_t = DEFAULT_TOLERANCE)]
     pub tolerance: f64,
-}
-
-/// The model folder to use: `--model`, else `$PHOTOMAT_MODEL`, else the bundled one; an error
-/// naming the path tried and how to train a model if it holds none.
-fn model_dir(arg: Option<&Path>) -> anyhow::Result<PathBuf> {
-    let (dir, source) = match (arg, std::env::var_os(MODEL_ENV)) {
-        (Some(dir), _) => (dir.to_path_buf(), "--model"),
-        (None, Some(env)) => (PathBuf::from(env), "$PHOTOMAT_MODEL"),
-        (None, None) => (bundled_model_dir(), "the bundled model folder"),
-    };
-    if let Some(missing) = missing_model_file(&dir) {
-        bail!(
-            "no trained model in '{}' ({source}): {missing} is missing. Train one with \
-             `photomat train-gan --data DATASET --out RUN`, then `photomat train-estimator \
-             --gan RUN --brdf 'height(ggx)' --out MODEL`, and pass --model MODEL (or set \
-             ${MODEL_ENV})",
-            dir.display()
-        );
-    }
-    Ok(dir)
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {

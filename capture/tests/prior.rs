@@ -1,0 +1,152 @@
+//! `photomat_capture::capture_with_prior` with the bundled model folder's generator prior: the
+//! inversion's loss falls, its decoded maps start the refinement, the steps are reported in
+//! order, capture.json records the prior, and the folder's estimators decide which models the
+//! prior can serve.
+
+use std::path::PathBuf;
+
+use candle_core::{DType, Device, Tensor};
+use photomat_brdfs as _; // link the built-in models
+use photomat_capture::{
+    CaptureOptions, GanPrior, PriorOptions, TRAINING_FOV_DEGREES, capture_with_prior, write_capture,
+};
+use photomat_core::flash::PHOTO_SIDE;
+use photomat_core::image_io::{PlanarImage, PngBits, encode_png, png_header};
+use photomat_core::render::render_radiance_with;
+use photomat_core::{FlashGeometry, Highlight, MaterialMaps, encode_display, lookup};
+
+const SIZE: usize = 64;
+
+fn bundled_model() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("..")
+        .join("models")
+        .join("demo")
+}
+
+/// A rough, striped `ggx` material photographed with the flash above pixel (30, 34) on the
+/// training data's square of side 2: PNG bytes.
+fn photo() -> Vec<u8> {
+    let brdf = lookup("ggx").unwrap();
+    let device = Device::Cpu;
+    let mut maps = MaterialMaps::defaults(brdf.params(), 1, SIZE, DType::F32, &device).unwrap();
+    let stripes: Vec<f32> = (0..3 * SIZE * SIZE)
+        .map(|i| 0.3 + 0.2 * (((i % SIZE) / 4) % 2) as f32 + 0.05 * (i / (SIZE * SIZE)) as f32)
+        .collect();
+    maps.insert(
+        "diffuse",
+        Tensor::from_vec(stripes, (1, 3, SIZE, SIZE), &device).unwrap(),
+    );
+    let maps = maps.with_texel_size(Some(PHOTO_SIDE / SIZE as f64));
+    let light = Highlight::from_pixel_on(30.0, 34.0, SIZE, PHOTO_SIDE);
+    let geometry =
+        FlashGeometry::with_side(&[light], SIZE, PHOTO_SIDE, DType::F32, &device).unwrap();
+    let image = encode_display(&render_radiance_with(brdf.as_ref(), &maps, &geometry).unwrap())
+        .unwrap()
+        .squeeze(0)
+        .unwrap();
+    encode_png(&PlanarImage::from_tensor(&image).unwrap(), PngBits::Eight).unwrap()
+}
+
+fn options(size: usize) -> CaptureOptions {
+    CaptureOptions {
+        size,
+        steps: 10,
+        fov_degrees: TRAINING_FOV_DEGREES,
+        ..CaptureOptions::default()
+    }
+}
+
+#[test]
+fn the_prior_inverts_the_generator_and_starts_the_refinement() {
+    let brdf = lookup("height(ggx, scale=0.02)").unwrap();
+    let prior = GanPrior::open(&bundled_model(), &brdf, &Device::Cpu)
+        .unwrap()
+        .expect("the bundled model has an estimator for height(ggx, scale=0.02)");
+    assert_eq!(prior.size_multiple(), 32, "E's stride");
+    let prior_options = PriorOptions {
+        steps: 12,
+        ..PriorOptions::default()
+    };
+    let mut steps = Vec::new();
+    let result = capture_with_prior(
+        &photo(),
+        "rendered.png",
+        &brdf,
+        &options(SIZE),
+        Some((&prior, &prior_options)),
+        &mut |step, _| steps.push(step),
+    )
+    .unwrap();
+    // Inversion steps first, then the refinement's, counted on.
+    assert_eq!(steps, (1..=22).collect::<Vec<_>>());
+    let used = result.prior.as_ref().expect("the prior was used");
+    let losses = &used.inversion.losses;
+    assert_eq!(losses.len(), 12);
+    assert!(
+        losses[11] < losses[0],
+        "inversion loss {} → {}",
+        losses[0],
+        losses[11]
+    );
+    // E's maps are the model's maps at the capture's size, and the refinement starts there:
+    // its first loss is their render's error (plus the TV prior), not a constant material's.
+    for spec in brdf.params() {
+        let map = used.maps.get(spec.name).unwrap();
+        assert_eq!(map.dims(), &[1, spec.channels, SIZE, SIZE], "{}", spec.name);
+    }
+    let (before, after) = (result.losses[0], *result.losses.last().unwrap());
+    assert!(after < before, "refinement loss {before} → {after}");
+
+    let dir = tempfile::tempdir().unwrap();
+    write_capture(&result, dir.path()).unwrap();
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("capture.json")).unwrap()).unwrap();
+    assert_eq!(record["prior"]["steps"], 12);
+    let recorded_first = record["prior"]["loss_first"].as_f64().unwrap();
+    assert!((recorded_first - losses[0]).abs() < 1e-12);
+    // The sheet has five panels: photo | M's relighting | E's maps | re-render | error.
+    let tiles = vec![PlanarImage::filled(3, SIZE, SIZE, 0.0); 5];
+    let expected = photomat_core::sheet::grid(&[tiles], 0.0).unwrap();
+    let (_, height, width) = png_header(&dir.path().join("sheet.png")).unwrap();
+    assert_eq!((height, width), (expected.height, expected.width));
+}
+
+#[test]
+fn the_prior_serves_only_the_models_the_folder_has_estimators_for() {
+    let dir = bundled_model();
+    for (spec, has) in [
+        ("height(ggx, scale=0.02)", true),
+        ("lambert", true),
+        ("coated", true),
+        ("ggx", false),
+        ("height(ggx, scale=0.05)", false), // another scale is another model
+    ] {
+        let brdf = lookup(spec).unwrap();
+        let prior = GanPrior::open(&dir, &brdf, &Device::Cpu).unwrap();
+        assert_eq!(prior.is_some(), has, "{spec}");
+    }
+}
+
+#[test]
+fn a_prior_capture_names_the_sizes_it_takes() {
+    let brdf = lookup("lambert").unwrap();
+    let prior = GanPrior::open(&bundled_model(), &brdf, &Device::Cpu)
+        .unwrap()
+        .unwrap();
+    let error = capture_with_prior(
+        &photo(),
+        "rendered.png",
+        &brdf,
+        &options(48),
+        Some((&prior, &PriorOptions::default())),
+        &mut |_, _| {},
+    )
+    .err()
+    .expect("48 is not a multiple of 32");
+    let message = format!("{error:#}");
+    assert!(
+        message.contains("multiple of 32") && message.contains("--size 32 or 64"),
+        "{message}"
+    );
+}
