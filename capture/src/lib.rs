@@ -283,12 +283,7 @@ pub fn capture_with_prior(
             ("raw".into(), raw.clone()),
             ("log_gain".into(), log_gain.clone()),
         ],
-        AdamConfig {
-            lr: options.lr,
-            beta1: 0.9,
-            beta2: 0.999,
-            eps: 1e-8,
-        },
+        AdamConfig::kingma(options.lr),
     )?;
     let start = Instant::now();
     let mut losses = Vec::with_capacity(options.steps);
@@ -340,10 +335,21 @@ pub fn capture_with_prior(
 /// The fitted maps rendered under `lights` (flash positions on the captured square, e.g.
 /// [`new_flash_positions`]), with the fitted gain, as display values: (L, 3, N, N).
 pub fn relight(capture: &Capture, lights: &[Highlight]) -> anyhow::Result<Tensor> {
+    render_on_square(capture, &capture.maps, capture.gain, lights)
+}
+
+/// `maps` of the capture's model rendered under `lights` on the captured square, times
+/// `gain`, as display values: (L, 3, N, N).
+fn render_on_square(
+    capture: &Capture,
+    maps: &MaterialMaps,
+    gain: f64,
+    lights: &[Highlight],
+) -> anyhow::Result<Tensor> {
     let (_, _, n, _) = capture.photo.dims4()?;
     let geometry = FlashGeometry::with_side(lights, n, capture.side, DType::F32, &Device::Cpu)?;
-    let radiance = render_radiance_with(capture.brdf.as_ref(), &capture.maps, &geometry)?;
-    Ok(encode_display(&(radiance * capture.gain)?)?)
+    let radiance = render_radiance_with(capture.brdf.as_ref(), maps, &geometry)?;
+    Ok(encode_display(&(radiance * gain)?)?)
 }
 
 /// Mean absolute difference of neighbouring texels (wrap-around) of a (B, C, H, W) tensor.
@@ -384,20 +390,6 @@ struct PriorRecord {
     seconds: f64,
 }
 
-/// The photo's flash render of `maps` with the gain `gain`, display values (1, 3, N, N).
-fn render_under_photo_flash(
-    capture: &Capture,
-    maps: &MaterialMaps,
-    gain: f64,
-) -> anyhow::Result<Tensor> {
-    let (_, _, n, _) = capture.photo.dims4()?;
-    let (row, col) = capture.highlight.pixel;
-    let light = Highlight::from_pixel_on(row, col, n, capture.side);
-    let geometry = FlashGeometry::with_side(&[light], n, capture.side, DType::F32, &Device::Cpu)?;
-    let radiance = render_radiance_with(capture.brdf.as_ref(), maps, &geometry)?;
-    Ok(encode_display(&(radiance * gain)?)?)
-}
-
 /// Writes `out/material/` (the maps: PNG + EXR + material.json), `out/sheet.png` (photo |
 /// re-render | ×4 absolute error; with a prior, M's relighting of the inverted material and
 /// the render of E's maps before refinement come between the photo and the re-render),
@@ -418,10 +410,14 @@ pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
     let mut prior_record = None;
     if let Some(prior) = &capture.prior {
         let inversion = &prior.inversion;
-        let before = render_under_photo_flash(
+        let (_, _, n, _) = capture.photo.dims4()?;
+        let (row, col) = capture.highlight.pixel;
+        let photo_flash = Highlight::from_pixel_on(row, col, n, capture.side);
+        let before = render_on_square(
             capture,
             &prior.maps,
             inversion.display_gain.powf(DISPLAY_GAMMA),
+            &[photo_flash],
         )?;
         let l1_before = (&before - &capture.photo)?
             .abs()?

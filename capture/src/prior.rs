@@ -153,12 +153,7 @@ impl GanPrior {
                 ("field".into(), field.clone()),
                 ("log_gain".into(), log_gain.clone()),
             ],
-            AdamConfig {
-                lr: options.lr,
-                beta1: 0.9,
-                beta2: 0.999,
-                eps: 1e-8,
-            },
+            AdamConfig::kingma(options.lr),
         )?;
         let relight = |ws: &Tensor, field: &Tensor, log_gain: &Tensor| -> anyhow::Result<_> {
             let features = synthesis.forward_field(field, ws, &NoiseInput::Zero)?;

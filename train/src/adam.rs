@@ -79,6 +79,17 @@ impl Default for AdamConfig {
 }
 
 impl AdamConfig {
+    /// Kingma & Ba 2015's defaults (β = (0.9, 0.999), ε = 1e-8) at learning rate `lr`: the
+    /// setting of the fits that optimise maps or latents directly (photo capture and its prior).
+    pub fn kingma(lr: f64) -> Self {
+        Self {
+            lr,
+            beta1: 0.9,
+            beta2: 0.999,
+            eps: 1e-8,
+        }
+    }
+
     /// The lazy-regularisation correction for a network whose regulariser runs every
     /// `interval` steps: with `c = interval/(interval+1)`, `lr·c`, `β₁^c`, `β₂^c`
     /// (StyleGAN2). An interval of 0 means "no lazy regulariser" and returns `self`.
