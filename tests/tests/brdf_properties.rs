@@ -98,16 +98,14 @@ fn every_model_passes_the_white_furnace() {
         let wi = [t.sin(), 0.0, t.cos()];
         for r in [0.3, 0.6, 1.0] {
             let rough: &[f64] = &[r];
-            let specular_only = albedo(
-                "ggx",
-                &constant_maps(&[
-                    ("diffuse", Z),
-                    ("specular", ONE),
-                    ("roughness", rough),
-                    ("normal", UP),
-                ]),
-                wi,
-            );
+            // A white specular lobe alone, flat: the maps of `ggx` and `blinn_phong` alike.
+            let white_specular = constant_maps(&[
+                ("diffuse", Z),
+                ("specular", ONE),
+                ("roughness", rough),
+                ("normal", UP),
+            ]);
+            let specular_only = albedo("ggx", &white_specular, wi);
             let coat = albedo(
                 "coated",
                 &constant_maps(&[
@@ -127,18 +125,8 @@ fn every_model_passes_the_white_furnace() {
             // Blinn-Phong with the implicit G gains energy at grazing incidence (as
             // `ggx(shadowing=implicit)` does), so only normal incidence is bounded: there its
             // albedo is the lobe's mean of cos 2θ_h ≤ 1.
-            let blinn_phong = albedo(
-                "blinn_phong",
-                &constant_maps(&[
-                    ("diffuse", Z),
-                    ("specular", ONE),
-                    ("roughness", rough),
-                    ("normal", UP),
-                ]),
-                wi,
-            );
             if theta_deg == 0.0 {
-                for v in blinn_phong {
+                for v in albedo("blinn_phong", &white_specular, wi) {
                     assert!(
                         v <= 1.0 + TOL,
                         "blinn_phong r={r}: albedo {v} at normal incidence"
