@@ -15,53 +15,26 @@
 //! the captures use `height(ggx, scale=0.02)` whatever the truth's model is). Captures at 256²
 //! with the field of view 90°, the simulator's geometry (side 2 at flash height 1).
 //!
-//! The error is the L1 of display-encoded images over the eight held-out lights, after one
-//! per-channel scale per method and photo (the ratio of mean linear radiances): the photo's
-//! exposure and white balance are unknowns of the capture, so a global colour scale is not
-//! counted against it. The truth is rendered at its own resolution and box-filtered to 256².
+//! The error is [`photomat_capture::evaluate::held_out_l1`]: the L1 of display-encoded images
+//! over the eight held-out lights, the truth exposed to a mean of 0.18 and each fit given the
+//! truth's per-channel means (the photo's exposure and white balance are unknowns of the
+//! capture, so a global colour scale is not counted against it). The truth is rendered at its
+//! own resolution and box-filtered to 256².
 
 use std::path::PathBuf;
 
 use anyhow::Context;
-use candle_core::{D, DType, Device, Tensor};
+use candle_core::Device;
 use photomat_brdfs as _; // link the built-in BRDF plugins
+use photomat_capture::evaluate::{held_out_l1, radiance_on_square};
 use photomat_capture::{
     CaptureOptions, GanPrior, PriorOptions, capture, capture_with_prior, new_flash_positions,
 };
 use photomat_core::flash::PHOTO_SIDE;
+use photomat_core::lookup;
 use photomat_core::map_files::load_maps;
-use photomat_core::render::render_radiance_with;
-use photomat_core::{Brdf, LightSet, MaterialMaps, encode_display, lookup};
 
 const SIZE: usize = 256;
-
-/// Linear radiance of `maps` under `lights` on the capture square: (L, 3, N, N).
-fn radiance(
-    brdf: &Brdf,
-    maps: &MaterialMaps,
-    lights: &LightSet,
-    n: usize,
-) -> anyhow::Result<Tensor> {
-    let geometry = lights.geometry_on(n, PHOTO_SIDE, DType::F32, &Device::Cpu)?;
-    Ok(render_radiance_with(brdf.as_ref(), maps, &geometry)?)
-}
-
-/// Display L1 of `fitted` against `truth` (both linear, (L, 3, N, N)) after the per-channel
-/// scale that equalises their means.
-fn scaled_l1(fitted: &Tensor, truth: &Tensor) -> anyhow::Result<f64> {
-    let mean = |t: &Tensor| -> anyhow::Result<Tensor> {
-        Ok(t.mean_keepdim(0)?
-            .mean_keepdim(D::Minus1)?
-            .mean_keepdim(D::Minus2)?)
-    };
-    // The floor keeps a black fit finite; its error is then the truth's own brightness.
-    let scale = mean(truth)?.broadcast_div(&mean(fitted)?.maximum(1e-8)?)?;
-    let scaled = fitted.broadcast_mul(&scale)?;
-    let l1 = (encode_display(&scaled)? - encode_display(truth)?)?
-        .abs()?
-        .mean_all()?;
-    Ok(l1.to_scalar::<f32>()? as f64)
-}
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -93,7 +66,7 @@ fn main() -> anyhow::Result<()> {
         anchor,
         ..CaptureOptions::default()
     };
-    let lights = LightSet::from_highlights(new_flash_positions(PHOTO_SIDE));
+    let lights = new_flash_positions(PHOTO_SIDE);
     println!(
         "{SIZE}² captures in {}, {} + {} steps, anchor {anchor}; display L1 under 8 held-out flashes",
         brdf.name(),
@@ -117,8 +90,8 @@ fn main() -> anyhow::Result<()> {
             .maps
             .clone()
             .with_texel_size(Some(PHOTO_SIDE / full as f64));
-        let held_truth =
-            radiance(&truth.brdf, &truth_maps, &lights, full)?.avg_pool2d(full / SIZE)?;
+        let held_truth = radiance_on_square(&truth.brdf, &truth_maps, &lights, PHOTO_SIDE)?
+            .avg_pool2d(full / SIZE)?;
         let bytes = std::fs::read(&file)?;
         let name = file.display().to_string();
         let direct = capture(&bytes, &name, &brdf, &options, &mut |_, _| {})?;
@@ -132,13 +105,16 @@ fn main() -> anyhow::Result<()> {
         )?;
         let prior_used = with_prior.prior.as_ref().context("no prior used")?;
         let errors = [
-            scaled_l1(&radiance(&brdf, &direct.maps, &lights, SIZE)?, &held_truth)?,
-            scaled_l1(
-                &radiance(&brdf, &prior_used.maps, &lights, SIZE)?,
+            held_out_l1(
+                &radiance_on_square(&brdf, &direct.maps, &lights, PHOTO_SIDE)?,
                 &held_truth,
             )?,
-            scaled_l1(
-                &radiance(&brdf, &with_prior.maps, &lights, SIZE)?,
+            held_out_l1(
+                &radiance_on_square(&brdf, &prior_used.maps, &lights, PHOTO_SIDE)?,
+                &held_truth,
+            )?,
+            held_out_l1(
+                &radiance_on_square(&brdf, &with_prior.maps, &lights, PHOTO_SIDE)?,
                 &held_truth,
             )?,
         ];

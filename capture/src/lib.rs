@@ -35,6 +35,7 @@
 //!
 //! Not yet: camera tilt, and fitted vignetting and ambient terms.
 
+pub mod evaluate;
 pub mod prior;
 
 use std::path::Path;
