@@ -19,6 +19,12 @@ highlight (row, col) in pixels and its texture as the family.
     validation/run.sh --count 48 --out flash-val      # then:
     photomat prepare --photos flash-val/photos --out flash-val-data --size 256
     photomat eval-detector --dataset flash-val-data
+
+With `--capture-set`, every photo also gets its truth maps in its own pixel grid
+(OUT/truth/NNNNNN/, a photomat material folder) and linear renders under the eight held-out
+flashes of `photomat capture`'s relighting (OUT/held/NNNNNN/K.exr), registered to the photo's
+pixels: what `capture/examples/mitsuba_validation.rs` judges captures against
+(validation/README.md, "A capture set").
 """
 
 import argparse
@@ -32,6 +38,10 @@ import numpy as np
 
 SIZE = 320  # rendered side in pixels
 SPP = 32  # samples per pixel: the sensor noise added afterwards dominates the Monte Carlo noise
+# The principled BSDF's `specular` (0.5: index of refraction 1.5), and the normal-incidence
+# Fresnel reflectance it means, ((1.5 − 1) / (1.5 + 1))² = 0.04: photomat's `specular` (F0).
+PRINCIPLED_SPECULAR = 0.5
+PRINCIPLED_F0 = 0.04
 TEXTURES = ["brick", "grass", "gravel", "moon"]
 # Tints of the grey texture photos (linear rgb): fabric-red, leather-brown, stone-grey,
 # paint-blue, wood-orange, moss-green.
@@ -93,8 +103,9 @@ def texture_maps(name, tint, rng, relief):
     return albedo, n * 0.5 + 0.5
 
 
-def scene_dict(mi, camera, target, flash, fov, albedo, normals, roughness):
-    """The Mitsuba scene of one photo."""
+def scene_dict(mi, camera, target, flash, fov, albedo, normals, roughness, principal_point=(0.0, 0.0), size=SIZE):
+    """The Mitsuba scene of one photo; `principal_point` is the sensor's principal point
+    offset (fractions of the film's width and height, Mitsuba's convention)."""
     T = mi.ScalarTransform4f
     principled = {
         "type": "principled",
@@ -104,7 +115,7 @@ def scene_dict(mi, camera, target, flash, fov, albedo, normals, roughness):
             "raw": True,
         },
         "roughness": roughness,
-        "specular": 0.5,
+        "specular": PRINCIPLED_SPECULAR,
     }
     return {
         "type": "scene",
@@ -113,12 +124,14 @@ def scene_dict(mi, camera, target, flash, fov, albedo, normals, roughness):
             "type": "perspective",
             "fov": fov,
             "fov_axis": "x",
+            "principal_point_offset_x": principal_point[0],
+            "principal_point_offset_y": principal_point[1],
             "to_world": T().look_at(origin=camera.tolist(), target=target.tolist(), up=[0, 1, 0]),
             "sampler": {"type": "independent", "sample_count": SPP},
             "film": {
                 "type": "hdrfilm",
-                "width": SIZE,
-                "height": SIZE,
+                "width": size,
+                "height": size,
                 "rfilter": {"type": "box"},
                 "pixel_format": "rgb",
             },
@@ -198,14 +211,193 @@ def draw(rng, index):
     }
 
 
-def render(mi, p, rng, albedo=None, normals=None):
-    """Linear rgb render (H, W, 3) of the parameters `p`."""
+def render(mi, p, rng, albedo=None, normals=None, principal_point=(0.0, 0.0), size=SIZE):
+    """Linear rgb render (size, size, 3) of the parameters `p`."""
     if albedo is None:
         albedo, normals = texture_maps(p["texture"], p["tint"], rng, p["relief"])
     scene = mi.load_dict(
-        scene_dict(mi, p["camera"], p["target"], p["flash"], p["fov"], albedo, normals, p["roughness"])
+        scene_dict(
+            mi, p["camera"], p["target"], p["flash"], p["fov"], albedo, normals, p["roughness"], principal_point, size
+        )
     )
     return np.array(mi.render(scene, seed=int(rng.integers(1 << 31))))
+
+
+def unproject(row, col, camera, frame, fov_deg, size):
+    """Points on the plane z = 0 seen through continuous pixels (row, col) (arrays), the
+    inverse of `project` for the input camera."""
+    left, up, forward = frame
+    t = math.tan(math.radians(fov_deg) / 2)
+    x = 2 * col / size - 1
+    y = 2 * row / size - 1
+    d = forward[None, :] - (x * t)[:, None] * left[None, :] - (y * t)[:, None] * up[None, :]
+    s = -camera[2] / d[:, 2]
+    return camera[None, :] + s[:, None] * d
+
+
+def bilinear(texture, u, v):
+    """Mitsuba's bilinear `bitmap` lookup at uv (arrays), repeat wrap: row 0 is v = 0."""
+    h, w = texture.shape[:2]
+    fx = u * w - 0.5
+    fy = v * h - 0.5
+    x0 = np.floor(fx).astype(int)
+    y0 = np.floor(fy).astype(int)
+    ax = (fx - x0)[:, None]
+    ay = (fy - y0)[:, None]
+    at = lambda yy, xx: texture[yy % h, xx % w]
+    top = at(y0, x0) * (1 - ax) + at(y0, x0 + 1) * ax
+    bottom = at(y0 + 1, x0) * (1 - ax) + at(y0 + 1, x0 + 1) * ax
+    return top * (1 - ay) + bottom * ay
+
+
+def plane_axes(frame):
+    """Tangent axes of the plane z = 0 that follow the photo: x along the image's right, y
+    along its up (what a capture's normal map means), z = +z."""
+    left, _, _ = frame
+    right = -left
+    ax = np.array([right[0], right[1], 0.0])
+    ax /= np.linalg.norm(ax)
+    ay = np.cross([0.0, 0.0, 1.0], ax)
+    return ax, ay, np.array([0.0, 0.0, 1.0])
+
+
+def truth_maps(p, albedo, normals, size, supersample=3):
+    """The photographed maps in the photo's pixel grid, (size, size, ·) each: base colour
+    (photomat's `diffuse`), and the normal in `plane_axes` (unit vectors), each averaged over
+    supersample² points per pixel."""
+    k = supersample
+    rows, cols = np.mgrid[0 : size * k, 0 : size * k]
+    points = unproject((rows.ravel() + 0.5) / k, (cols.ravel() + 0.5) / k, p["camera"], p["frame"], p["fov"], size)
+    # The 3 × 3 rectangle's uv: (x + 1.5) / 3, (y + 1.5) / 3 (checked against Mitsuba's uv AOV).
+    u = (points[:, 0] + 1.5) / 3
+    v = (points[:, 1] + 1.5) / 3
+    diffuse = bilinear(albedo, u, v)
+    world = bilinear(normals * 2 - 1, u, v)
+    world /= np.linalg.norm(world, axis=-1, keepdims=True)
+    ax, ay, az = plane_axes(p["frame"])
+    normal = np.stack([world @ ax, world @ ay, world @ az], axis=-1)
+
+    def pool(x):
+        return x.reshape(size, k, size, k, -1).mean(axis=(1, 3))
+
+    normal = pool(normal)
+    normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
+    return pool(diffuse), normal
+
+
+# Held-out renders: rendered HELD_SCALE× finer than the photo over a field of view
+# HELD_MARGIN× wider (room for the tilt's parallax), then resampled into the photo's grid.
+HELD_SCALE = 2
+HELD_MARGIN = 1.1
+
+
+def held_out_rigs(p, size):
+    """The eight held-out flashes of a capture (photomat's `new_flash_positions`: a ring at a
+    quarter of the photographed square's side around its centre), as Mitsuba rigs.
+
+    photomat relights a capture with camera and flash together above each new highlight h_k
+    (capture units: camera height 1, x right, y up). Here the whole rig (camera, flash and its
+    offset from the lens) moves parallel to the sensor by D·(h_k − h₀), D the distance to the
+    plane along the view axis and h₀ the photo's true highlight in capture units; the sensor's
+    principal point shifts back so that the photographed region stays in view. `warp_to_photo`
+    then puts every plane point back on the photo's pixel that saw it.
+    """
+    left, up, forward = p["frame"]
+    right = -left
+    t = math.tan(math.radians(p["fov"]) / 2)
+    side = 2 * t  # photomat_capture::square_side of a square photo
+    depth = -p["camera"][2] / forward[2]
+    row0, col0 = project(mirror_point(p["camera"], p["flash"]), p["camera"], p["frame"], p["fov"], size)
+    h0 = np.array([(col0 / size - 0.5) * side, (0.5 - row0 / size) * side])
+    wide = 2 * math.degrees(math.atan(t * HELD_MARGIN))
+    rigs = []
+    for k in range(8):
+        angle = k * math.pi / 4
+        hk = np.array([0.25 * side * math.cos(angle), 0.25 * side * math.sin(angle)])
+        a, b = depth * (hk - h0)
+        shift = a * right + b * up
+        # Screen coordinates of the wide sensor move by −a/(D t') and +b/(D t'); the principal
+        # point (fractions of the film, Mitsuba's convention: +x shows more of the right, +y
+        # more of the bottom) takes them back.
+        tw = t * HELD_MARGIN
+        # Where the moved rig's specular peak lands in the photo's grid, against where
+        # photomat's collocated model puts it (h_k): the flash offset and the tilt move it.
+        peak = project(mirror_point(p["camera"] + shift, p["flash"] + shift), p["camera"], p["frame"], p["fov"], size)
+        model_px = ((0.5 - hk[1] / side) * size, (hk[0] / side + 0.5) * size)
+        rigs.append(
+            {
+                "highlight": hk.tolist(),
+                "peak_offset_px": math.hypot(peak[0] - model_px[0], peak[1] - model_px[1]),
+                "camera": p["camera"] + shift,
+                "target": p["target"] + shift,
+                "flash": p["flash"] + shift,
+                "fov": wide,
+                "principal_point": (-a / (2 * depth * tw), b / (2 * depth * tw)),
+            }
+        )
+    return rigs
+
+
+def warp_to_photo(image, rig, p, size, supersample=2):
+    """A held-out render (rendered by `rig`, (S, S, 3)) resampled into the photo's pixel grid:
+    each photo pixel gets the mean of supersample² bilinear lookups at the projections of the
+    plane points it saw (the plane induces an exact correspondence). Returns (size, size, 3)
+    and the fraction of lookups that fell outside the render (clamped to its border)."""
+    k = supersample
+    rows, cols = np.mgrid[0 : size * k, 0 : size * k]
+    points = unproject((rows.ravel() + 0.5) / k, (cols.ravel() + 0.5) / k, p["camera"], p["frame"], p["fov"], size)
+    left, up, forward = p["frame"]  # the rig keeps the photo's orientation
+    d = points - rig["camera"][None, :]
+    z = d @ forward
+    tw = math.tan(math.radians(rig["fov"]) / 2)
+    x = -(d @ left) / (z * tw) - 2 * rig["principal_point"][0]
+    y = -(d @ up) / (z * tw) - 2 * rig["principal_point"][1]
+    n = image.shape[0]
+    fc = (x + 1) / 2 * n - 0.5
+    fr = (y + 1) / 2 * n - 0.5
+    outside = float(np.mean((fc < 0) | (fc > n - 1) | (fr < 0) | (fr > n - 1)))
+    fc = np.clip(fc, 0, n - 1.001)
+    fr = np.clip(fr, 0, n - 1.001)
+    c0 = fc.astype(int)
+    r0 = fr.astype(int)
+    ac = (fc - c0)[:, None]
+    ar = (fr - r0)[:, None]
+    top = image[r0, c0] * (1 - ac) + image[r0, c0 + 1] * ac
+    bottom = image[r0 + 1, c0] * (1 - ac) + image[r0 + 1, c0 + 1] * ac
+    values = top * (1 - ar) + bottom * ar
+    return values.reshape(size, k, size, k, 3).mean(axis=(1, 3)), outside
+
+
+def write_exr(mi, path, array):
+    """A float32 EXR of an (H, W, C) array, C = 1 (channel Y) or 3 (R, G, B)."""
+    fmt = mi.Bitmap.PixelFormat.Y if array.shape[-1] == 1 else mi.Bitmap.PixelFormat.RGB
+    mi.Bitmap(np.ascontiguousarray(array, dtype=np.float32), fmt).write(path)
+
+
+def write_truth(mi, folder, diffuse, normal, roughness, specular):
+    """The truth as a photomat material folder of model `ggx` (docs/datasets.md): EXR maps and
+    material.json; specular and roughness are constants of the principled BSDF."""
+    os.makedirs(folder, exist_ok=True)
+    size = diffuse.shape[0]
+    write_exr(mi, os.path.join(folder, "diffuse.exr"), diffuse)
+    write_exr(mi, os.path.join(folder, "normal.exr"), normal)
+    entry = lambda name, space, lo, **kw: {
+        "name": name, "channels": 1 if name == "roughness" else 3, "color_space": space, "range": [lo, 1.0], **kw
+    }
+    manifest = {
+        "format": "photomat-material",
+        "version": 1,
+        "brdf": "ggx",
+        "resolution": size,
+        "maps": [
+            entry("diffuse", "gamma22", 0.0, exr="diffuse.exr"),
+            entry("specular", "gamma22", 0.0, value=[specular] * 3),
+            entry("roughness", "linear", 0.0, value=[roughness]),
+            entry("normal", "unit-vector", -1.0, exr="normal.exr"),
+        ],
+    }
+    with open(os.path.join(folder, "material.json"), "w") as f:
+        json.dump(manifest, f, indent=1)
 
 
 def check(mi):
@@ -233,6 +425,13 @@ def main():
     parser.add_argument("--seed", type=int, default=1)
     parser.add_argument("--out", default="flash-val")
     parser.add_argument("--check", action="store_true", help="only check the truth's projection")
+    parser.add_argument(
+        "--capture-set",
+        action="store_true",
+        help="also write each photo's truth maps (truth/NNNNNN/, a photomat ggx material in the photo's "
+        "pixel grid) and its renders under the 8 held-out flashes of photomat capture (held/NNNNNN/K.exr, "
+        "linear, without the phone's pipeline)",
+    )
     args = parser.parse_args()
 
     import mitsuba as mi
@@ -246,7 +445,8 @@ def main():
     photos = []
     for index in range(args.count):
         p = draw(rng, index)
-        linear = render(mi, p, rng)
+        albedo, normals = texture_maps(p["texture"], p["tint"], rng, p["relief"])
+        linear = render(mi, p, rng, albedo, normals)
         jpeg = develop(linear, rng, p["vignetting"], p["noise"], p["exposure"], p["quality"])
         name = f"photos/{index:06}.jpg"
         with open(os.path.join(args.out, name), "wb") as f:
@@ -267,6 +467,30 @@ def main():
                 "pipeline": {k: p[k] for k in ["vignetting", "noise", "exposure", "quality"]},
             }
         )
+        if args.capture_set:
+            truth = f"truth/{index:06}"
+            diffuse, normal = truth_maps(p, albedo, normals, SIZE)
+            write_truth(mi, os.path.join(args.out, truth), diffuse, normal, p["roughness"], PRINCIPLED_F0)
+            # Its own stream, so that the photos are the same with and without --capture-set.
+            held_rng = np.random.default_rng([args.seed, index])
+            held = []
+            for k, rig in enumerate(held_out_rigs(p, SIZE)):
+                q = dict(p, camera=rig["camera"], target=rig["target"], flash=rig["flash"], fov=rig["fov"])
+                wide = render(mi, q, held_rng, albedo, normals, rig["principal_point"], HELD_SCALE * SIZE)
+                image, outside = warp_to_photo(wide, rig, p, SIZE)
+                name_k = f"held/{index:06}/{k}.exr"
+                os.makedirs(os.path.dirname(os.path.join(args.out, name_k)), exist_ok=True)
+                write_exr(mi, os.path.join(args.out, name_k), image)
+                held.append(
+                    {
+                        "render": name_k,
+                        "highlight": rig["highlight"],
+                        "peak_offset_px": rig["peak_offset_px"],
+                        "outside": outside,
+                    }
+                )
+            photos[-1]["truth"] = truth
+            photos[-1]["held_out"] = held
         print(f"{index + 1}/{args.count} {name} ({p['texture']}) highlight ({row:.1f}, {col:.1f})", flush=True)
     record = {
         "format": "photomat-simulation",
