@@ -31,7 +31,12 @@
 //! With a trained model folder the maps do not start constant: [`capture_with_prior`] first
 //! inverts the generator to the photo and decodes what it finds with the estimator
 //! ([`prior`]), then refines those maps by the same loss, optionally held near them by an
-//! anchor term `μ · mean |θ − θ₀|`.
+//! anchor term `μ · mean |θ − θ₀|`. [`capture_auto`] chooses the model as well: the cheapest
+//! of the folder's estimators whose decoding of the inverted generator matches the photo
+//! within a tolerance of the best one's (docs/capture.md, "Choosing the model").
+//!
+//! [`evaluate`] holds the measures of a capture against known maps (docs/capture.md,
+//! "Validation on photos this project did not make").
 //!
 //! Not yet: camera tilt, and fitted vignetting and ambient terms.
 
@@ -50,6 +55,7 @@ use photomat_core::sheet::grid;
 use photomat_core::{Brdf, FlashGeometry, Highlight, MaterialMaps, encode_display};
 use photomat_data::dataset::photo::{Framing, prepare_photo};
 use photomat_data::highlight::{DetectionStatus, DetectorKind};
+use photomat_estimator::sample::choice::{Candidate, Selection, choose};
 use photomat_train::{Adam, AdamConfig};
 use serde::Serialize;
 
@@ -156,6 +162,8 @@ pub struct Capture {
     pub seconds: f64,
     /// The generator prior, when one was used.
     pub prior: Option<PriorUsed>,
+    /// How the model was chosen, for a capture in `auto` ([`capture_auto`]).
+    pub selection: Option<Selection>,
 }
 
 /// What the generator prior of a capture did.
@@ -203,6 +211,94 @@ pub fn capture_with_prior(
     prior: Option<(&GanPrior, &PriorOptions)>,
     progress: &mut dyn FnMut(usize, f64),
 ) -> anyhow::Result<Capture> {
+    let input = prepare_input(bytes, name, options)?;
+    let start = match prior {
+        None => Start::constant(brdf, input.size)?,
+        Some((prior, prior_options)) => {
+            let inversion = invert(&input, name, prior, prior_options, progress)?;
+            let raw = prior.decode(&inversion, brdf)?.with_context(|| {
+                format!("'{}' has no estimator for {}", prior.dir(), brdf.name())
+            })?;
+            Start::from_prior(brdf, &input, prior, inversion, raw)?
+        }
+    };
+    refine(input, name, brdf, start, options, progress)
+}
+
+/// [`capture_with_prior`] in the model the photo needs, chosen among the prior's estimators
+/// (`--brdf auto`; docs/capture.md, "Choosing the model"): the generator is inverted once,
+/// every estimator decodes the found material, each decoding is rendered under the photo's
+/// flash, and the cheapest model whose error against the photo is within `tolerance` of the
+/// best one's ([`photomat_estimator::sample::choice::choose`], linear-radiance L1) is
+/// refined. Returns the capture, whose [`Capture::selection`] records every candidate.
+pub fn capture_auto(
+    bytes: &[u8],
+    name: &str,
+    options: &CaptureOptions,
+    prior: (&GanPrior, &PriorOptions),
+    tolerance: f64,
+    progress: &mut dyn FnMut(usize, f64),
+) -> anyhow::Result<Capture> {
+    let (prior, prior_options) = prior;
+    if prior.estimators().is_empty() {
+        bail!("'{}' has no estimator to choose from", prior.dir());
+    }
+    let input = prepare_input(bytes, name, options)?;
+    let inversion = invert(&input, name, prior, prior_options, progress)?;
+    let photo_linear = input.photo.powf(DISPLAY_GAMMA)?;
+    let radiance_gain = inversion.display_gain.powf(DISPLAY_GAMMA);
+    let mut candidates = Vec::new();
+    let mut decoded = Vec::new();
+    for estimator in prior.estimators() {
+        let brdf = estimator.brdf().clone();
+        let raw = estimator.estimator().forward(&inversion.features)?.detach();
+        let maps = brdf.decode(&raw)?.with_texel_size(Some(input.texel));
+        let radiance =
+            (render_radiance_with(brdf.as_ref(), &maps, &input.geometry)? * radiance_gain)?;
+        let l1 = (encode_display(&radiance)? - &input.photo)?
+            .abs()?
+            .mean_all()?
+            .to_scalar::<f32>()? as f64;
+        // The photo's own range: clipped highlights stay clipped in both.
+        let l1_linear = (radiance.clamp(0.0, 1.0)? - &photo_linear)?
+            .abs()?
+            .mean_all()?
+            .to_scalar::<f32>()? as f64;
+        candidates.push(Candidate {
+            brdf: brdf.name(),
+            channels: brdf.channels(),
+            l1,
+            l1_linear,
+        });
+        decoded.push((brdf, raw));
+    }
+    let chosen = choose(&candidates, tolerance)
+        .with_context(|| format!("{name}: every model's error is non-finite"))?;
+    let (brdf, raw) = decoded.swap_remove(chosen);
+    let selection = Selection {
+        chosen: brdf.name(),
+        tolerance,
+        candidates,
+    };
+    let start = Start::from_prior(&brdf, &input, prior, inversion, raw)?;
+    let mut capture = refine(input, name, &brdf, start, options, progress)?;
+    capture.selection = Some(selection);
+    Ok(capture)
+}
+
+/// A photo ready to be fitted: resampled, its highlight found, its flash geometry.
+struct Input {
+    /// (1, 3, N, N) display values.
+    photo: Tensor,
+    size: usize,
+    highlight: HighlightUsed,
+    side: f64,
+    texel: f64,
+    geometry: FlashGeometry,
+}
+
+/// Checks the options, decodes and resamples the photo and finds its highlight.
+fn prepare_input(bytes: &[u8], name: &str, options: &CaptureOptions) -> anyhow::Result<Input> {
     let (lo, hi) = SIZE_RANGE;
     if !(lo..=hi).contains(&options.size) {
         bail!("capture size {} is outside {lo} … {hi}", options.size);
@@ -249,33 +345,95 @@ pub fn capture_with_prior(
     let (row, col) = highlight.pixel;
     let light = Highlight::from_pixel_on(row, col, n, side);
     let geometry = FlashGeometry::with_side(&[light], n, side, DType::F32, &device)?;
-    let texel = side / n as f64;
+    Ok(Input {
+        photo,
+        size: n,
+        highlight,
+        side,
+        texel: side / n as f64,
+        geometry,
+    })
+}
 
-    let (start_raw, start_log_gain, prior_used) = match prior {
-        None => (
-            Tensor::zeros((1, brdf.channels(), n, n), DType::F32, &device)?,
-            0.0,
-            None,
-        ),
-        Some((prior, prior_options)) => {
-            let inversion = prior
-                .invert(&photo, &geometry.omega, prior_options, progress)
-                .with_context(|| format!("{name}: generator prior"))?;
-            let maps = brdf
-                .decode(&inversion.raw)?
-                .with_texel_size(Some(texel))
-                .map_tensors(|t| Ok(t.detach()))?;
-            // A display gain d is a radiance gain d^γ under the display gamma.
-            let log_gain = DISPLAY_GAMMA * inversion.display_gain.ln();
-            let raw = inversion.raw.clone();
-            let used = PriorUsed {
+/// The generator prior's inversion to the photo of `input`.
+fn invert(
+    input: &Input,
+    name: &str,
+    prior: &GanPrior,
+    options: &PriorOptions,
+    progress: &mut dyn FnMut(usize, f64),
+) -> anyhow::Result<Inversion> {
+    prior
+        .invert(&input.photo, &input.geometry.omega, options, progress)
+        .with_context(|| format!("{name}: generator prior"))
+}
+
+/// Where a refinement starts: raw maps, log radiance gain, and the prior that gave them.
+struct Start {
+    raw: Tensor,
+    log_gain: f64,
+    prior: Option<PriorUsed>,
+}
+
+impl Start {
+    /// Constant maps (raw zeros) and gain 1.
+    fn constant(brdf: &Brdf, size: usize) -> anyhow::Result<Self> {
+        Ok(Self {
+            raw: Tensor::zeros((1, brdf.channels(), size, size), DType::F32, &Device::Cpu)?,
+            log_gain: 0.0,
+            prior: None,
+        })
+    }
+
+    /// E's raw maps `raw` of the inverted material, with the inversion's gain.
+    fn from_prior(
+        brdf: &Brdf,
+        input: &Input,
+        prior: &GanPrior,
+        inversion: Inversion,
+        raw: Tensor,
+    ) -> anyhow::Result<Self> {
+        let maps = brdf
+            .decode(&raw)?
+            .with_texel_size(Some(input.texel))
+            .map_tensors(|t| Ok(t.detach()))?;
+        // A display gain d is a radiance gain d^γ under the display gamma.
+        let log_gain = DISPLAY_GAMMA * inversion.display_gain.ln();
+        Ok(Self {
+            raw,
+            log_gain,
+            prior: Some(PriorUsed {
                 model: prior.dir().to_string(),
                 inversion,
                 maps,
-            };
-            (raw, log_gain, Some(used))
-        }
-    };
+            }),
+        })
+    }
+}
+
+/// The refinement of the module docs, from `start`.
+fn refine(
+    input: Input,
+    name: &str,
+    brdf: &Brdf,
+    start: Start,
+    options: &CaptureOptions,
+    progress: &mut dyn FnMut(usize, f64),
+) -> anyhow::Result<Capture> {
+    let Input {
+        photo,
+        highlight,
+        side,
+        texel,
+        geometry,
+        ..
+    } = input;
+    let device = Device::Cpu;
+    let Start {
+        raw: start_raw,
+        log_gain: start_log_gain,
+        prior: prior_used,
+    } = start;
     let offset = prior_used.as_ref().map_or(0, |p| p.inversion.losses.len());
     let raw = Var::from_tensor(&start_raw)?;
     let log_gain = Var::from_tensor(&Tensor::new(&[start_log_gain as f32], &device)?)?;
@@ -330,6 +488,7 @@ pub fn capture_with_prior(
         losses,
         seconds: start.elapsed().as_secs_f64(),
         prior: prior_used,
+        selection: None,
     })
 }
 
@@ -376,6 +535,9 @@ struct CaptureRecord<'a> {
     l1_encoded: f64,
     seconds: f64,
     prior: Option<PriorRecord>,
+    /// How the model was chosen (`--brdf auto`): every candidate's error, the tolerance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    selection: Option<serde_json::Value>,
 }
 
 /// What `capture.json` records of the generator prior.
@@ -398,11 +560,19 @@ struct PriorRecord {
 /// [`new_flash_positions`], in a row) and `out/capture.json`.
 pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
     std::fs::create_dir_all(out).with_context(|| format!("cannot create '{}'", out.display()))?;
+    let selection = capture
+        .selection
+        .as_ref()
+        .map(serde_json::to_value)
+        .transpose()?;
     save_maps(
         &out.join("material"),
         capture.brdf.as_ref(),
         &capture.maps,
-        &SaveOptions::default(),
+        &SaveOptions {
+            selection: selection.clone(),
+            ..SaveOptions::default()
+        },
     )?;
     let error = (&capture.render - &capture.photo)?.abs()?;
     let l1 = error.mean_all()?.to_scalar::<f32>()? as f64;
@@ -465,6 +635,7 @@ pub fn write_capture(capture: &Capture, out: &Path) -> anyhow::Result<()> {
         l1_encoded: l1,
         seconds: capture.seconds,
         prior: prior_record,
+        selection,
     };
     write_atomic(
         &out.join("capture.json"),

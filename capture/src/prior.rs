@@ -29,15 +29,18 @@ use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor, Var};
 use photomat_core::Brdf;
 use photomat_estimator::EstimatorModel;
-use photomat_estimator::sample::choice::load_estimators;
+use photomat_estimator::sample::choice::{cost_key, load_estimators};
 use photomat_generator::{GanModel, NoiseInput};
 use photomat_train::{Adam, AdamConfig};
 
-/// A trained model folder's G, M and the E that decodes into the capture's model.
+/// A trained model folder's G, M and the estimators E that decode its neural materials: one
+/// for a capture in a named model ([`GanPrior::open`]), all of them for a capture that
+/// chooses its model ([`GanPrior::open_all`], `--brdf auto`).
 pub struct GanPrior {
     dir: String,
     gan: GanModel,
-    estimator: EstimatorModel,
+    /// Cheapest first ([`cost_key`]).
+    estimators: Vec<EstimatorModel>,
 }
 
 /// How the inversion runs.
@@ -65,8 +68,8 @@ impl Default for PriorOptions {
 /// What an inversion found.
 #[derive(Debug, Clone)]
 pub struct Inversion {
-    /// E's raw (pre-decoding) maps of the found neural material: (1, C, N, N).
-    pub raw: Tensor,
+    /// G's neural material found: (1, F, N, N) features.
+    pub features: Tensor,
     /// The fitted display-domain gain `e^g`.
     pub display_gain: f64,
     /// M's relighting of the found material under the photo's flash, with the gain, display
@@ -83,6 +86,15 @@ impl GanPrior {
     /// in `brdf`. `Ok(None)` when no estimator of the folder decodes into `brdf` (canonical
     /// names compared): the caller then fits from constant maps and says so.
     pub fn open(dir: &Path, brdf: &Brdf, device: &Device) -> anyhow::Result<Option<Self>> {
+        let mut prior = Self::open_all(dir, device)?;
+        let name = brdf.name();
+        prior.estimators.retain(|e| e.brdf().name() == name);
+        Ok((!prior.estimators.is_empty()).then_some(prior))
+    }
+
+    /// Opens the model folder `dir` with every estimator it holds, cheapest first: what
+    /// [`crate::capture_auto`] chooses from.
+    pub fn open_all(dir: &Path, device: &Device) -> anyhow::Result<Self> {
         let gan = GanModel::load(dir, device)
             .with_context(|| format!("cannot load the GAN in '{}'", dir.display()))?;
         if !gan.generator().synthesis().is_spatial() {
@@ -92,16 +104,13 @@ impl GanPrior {
                 dir.display()
             );
         }
-        let feature_channels = gan.config().feature_channels;
-        let name = brdf.name();
-        let estimator = load_estimators(dir, feature_channels, device)?
-            .into_iter()
-            .find(|e| e.brdf().name() == name);
-        Ok(estimator.map(|estimator| Self {
+        let mut estimators = load_estimators(dir, gan.config().feature_channels, device)?;
+        estimators.sort_by_key(cost_key);
+        Ok(Self {
             dir: dir.display().to_string(),
             gan,
-            estimator,
-        }))
+            estimators,
+        })
     }
 
     /// The model folder, as given.
@@ -109,18 +118,34 @@ impl GanPrior {
         &self.dir
     }
 
-    /// Sides a prior capture may have are multiples of this: G's cell size and E's total
-    /// stride, whichever is larger (both are powers of two).
+    /// The estimators, cheapest first.
+    pub fn estimators(&self) -> &[EstimatorModel] {
+        &self.estimators
+    }
+
+    /// E's raw (pre-decoding) maps of the inverted material for `brdf`, (1, C, N, N); `None`
+    /// when no estimator of the folder decodes into `brdf`.
+    pub fn decode(&self, inversion: &Inversion, brdf: &Brdf) -> anyhow::Result<Option<Tensor>> {
+        let name = brdf.name();
+        self.estimators
+            .iter()
+            .find(|e| e.brdf().name() == name)
+            .map(|e| Ok(e.estimator().forward(&inversion.features)?.detach()))
+            .transpose()
+    }
+
+    /// Sides a prior capture may have are multiples of this: G's cell size and the
+    /// estimators' total stride, whichever is largest (all are powers of two).
     pub fn size_multiple(&self) -> usize {
-        self.gan
-            .config()
-            .cell_size()
-            .max(self.estimator.estimator().config().total_stride())
+        self.estimators
+            .iter()
+            .map(|e| e.estimator().config().total_stride())
+            .fold(self.gan.config().cell_size(), usize::max)
     }
 
     /// Inverts M∘G to `photo` (1, 3, N, N display values) under the per-texel flash
-    /// directions `omega` (1, 3, N, N), and decodes the result with E. `progress(step, loss)`
-    /// after every step.
+    /// directions `omega` (1, 3, N, N). `progress(step, loss)` after every step; [`Self::decode`]
+    /// reads the found material's maps.
     pub fn invert(
         &self,
         photo: &Tensor,
@@ -176,10 +201,9 @@ impl GanPrior {
             progress(step + 1, value);
         }
         let (features, display) = relight(ws.as_tensor(), field.as_tensor(), log_gain.as_tensor())?;
-        let raw = self.estimator.estimator().forward(&features)?.detach();
         let display_gain = log_gain.as_tensor().exp()?.to_vec1::<f32>()?[0] as f64;
         Ok(Inversion {
-            raw,
+            features: features.detach(),
             display_gain,
             relit: display.clamp(0f32, 1f32)?.detach(),
             losses,

@@ -1,14 +1,15 @@
 //! `photomat_capture::capture_with_prior` with the bundled model folder's generator prior: the
 //! inversion's loss falls, its decoded maps start the refinement, the steps are reported in
 //! order, capture.json records the prior, and the folder's estimators decide which models the
-//! prior can serve.
+//! prior can serve, and `capture_auto` chooses among them.
 
 use std::path::PathBuf;
 
 use candle_core::{DType, Device, Tensor};
 use photomat_brdfs as _; // link the built-in models
 use photomat_capture::{
-    CaptureOptions, GanPrior, PriorOptions, TRAINING_FOV_DEGREES, capture_with_prior, write_capture,
+    CaptureOptions, GanPrior, PriorOptions, TRAINING_FOV_DEGREES, capture_auto, capture_with_prior,
+    write_capture,
 };
 use photomat_core::flash::PHOTO_SIDE;
 use photomat_core::image_io::{PlanarImage, PngBits, encode_png, png_header};
@@ -148,5 +149,68 @@ fn a_prior_capture_names_the_sizes_it_takes() {
     assert!(
         message.contains("multiple of 32") && message.contains("--size 32 or 64"),
         "{message}"
+    );
+}
+
+#[test]
+fn auto_refines_the_cheapest_model_within_the_tolerance_and_records_every_candidate() {
+    let prior = GanPrior::open_all(&bundled_model(), &Device::Cpu).unwrap();
+    let names: Vec<String> = prior.estimators().iter().map(|e| e.brdf().name()).collect();
+    // Cheapest first: 6, 8 and 11 map channels.
+    assert_eq!(names, ["lambert", "height(ggx, scale=0.02)", "coated"]);
+    let prior_options = PriorOptions {
+        steps: 8,
+        ..PriorOptions::default()
+    };
+    let run = |tolerance: f64| {
+        capture_auto(
+            &photo(),
+            "rendered.png",
+            &options(SIZE),
+            (&prior, &prior_options),
+            tolerance,
+            &mut |_, _| {},
+        )
+        .unwrap()
+    };
+    // Any model passes an unbounded tolerance: the cheapest is refined.
+    let loose = run(f64::INFINITY);
+    let selection = loose.selection.as_ref().unwrap();
+    assert_eq!(selection.chosen, "lambert");
+    assert_eq!(loose.brdf.name(), "lambert");
+    let errors: Vec<f64> = selection.candidates.iter().map(|c| c.l1_linear).collect();
+    assert_eq!(selection.candidates.len(), 3);
+    assert!(
+        errors.iter().all(|e| e.is_finite() && *e > 0.0),
+        "{errors:?}"
+    );
+    // At tolerance 0 only the best passes: the same inversion (same seed), so the same errors.
+    let strict = run(0.0);
+    let strict_selection = strict.selection.as_ref().unwrap();
+    let strict_errors: Vec<f64> = strict_selection
+        .candidates
+        .iter()
+        .map(|c| c.l1_linear)
+        .collect();
+    assert_eq!(strict_errors, errors);
+    let best = errors
+        .iter()
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(b.1))
+        .unwrap()
+        .0;
+    assert_eq!(strict_selection.chosen, names[best]);
+    assert_eq!(strict.brdf.name(), names[best]);
+    // The folder records the choice in capture.json and material.json.
+    let dir = tempfile::tempdir().unwrap();
+    write_capture(&strict, dir.path()).unwrap();
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("capture.json")).unwrap()).unwrap();
+    assert_eq!(record["selection"]["chosen"], names[best].as_str());
+    let loaded = photomat_core::map_files::load_maps(&dir.path().join("material"), None).unwrap();
+    assert_eq!(loaded.brdf.name(), names[best]);
+    assert_eq!(
+        loaded.manifest.selection.unwrap()["chosen"],
+        names[best].as_str()
     );
 }

@@ -1,7 +1,8 @@
 //! The `photomat` command line through `photomat_cli::run_with_output`: `brdfs` lists the
 //! built-ins with their channel counts, `render` writes the renderer's image and orbit contact
 //! sheets, `brdf-eval` matches Lambert's closed form and its gradients match finite
-//! differences of its own values, `capture --fov` sets the captured square's side.
+//! differences of its own values, `capture --fov` sets the captured square's side
+//! and `capture --brdf auto` writes the model it chose.
 
 use photomat_tests as _;
 
@@ -658,4 +659,26 @@ fn cli_capture_takes_the_field_of_view_and_refuses_one_out_of_range() {
         serde_json::from_slice(&std::fs::read(with_prior.join("capture.json")).unwrap()).unwrap();
     assert_eq!(record["prior"]["steps"], 3, "{record}");
     assert_eq!(record["steps"], 2, "{record}");
+
+    // --brdf auto: the folder's three estimators are the candidates; the chosen one is the
+    // model of the maps written.
+    let auto = dir.path().join("auto");
+    let printed = capture_with_model("auto", &auto);
+    assert!(
+        printed.contains("--brdf auto (tolerance 0.1):"),
+        "{printed}"
+    );
+    let record: Value =
+        serde_json::from_slice(&std::fs::read(auto.join("capture.json")).unwrap()).unwrap();
+    let chosen = record["selection"]["chosen"].as_str().unwrap().to_string();
+    assert_eq!(
+        record["selection"]["candidates"].as_array().unwrap().len(),
+        3
+    );
+    assert_eq!(record["brdf"], chosen.as_str(), "{record}");
+    let manifest: Value = serde_json::from_slice(
+        &std::fs::read(auto.join("material").join("material.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(manifest["brdf"], chosen.as_str(), "{manifest}");
 }

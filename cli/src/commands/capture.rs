@@ -1,9 +1,10 @@
-//! `photomat capture PHOTO --brdf SPEC --out DIR [--size 256] [--steps 400] [--fov 67]
-//! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]`: one
-//! phone flash photo → maps of a named BRDF model. The fit is the library's
-//! `photomat_capture::capture_with_prior` (docs/capture.md): from constant maps, or, with
-//! `--prior` or `--model`, from the model folder's generator prior when the folder has an
-//! estimator for SPEC. This command
+//! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--size 256] [--steps 400] [--fov 67]
+//! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]
+//! [--tolerance T]`: one phone flash photo → maps of a named BRDF model. The fit is the
+//! library's `photomat_capture::capture_with_prior` (docs/capture.md): from constant maps, or,
+//! with `--prior` or `--model`, from the model folder's generator prior when the folder has an
+//! estimator for SPEC; with `--brdf auto`, `photomat_capture::capture_auto` chooses the model
+//! among the folder's estimators. This command
 //! reads the file, locks DIR, shows progress and writes DIR/material/ (loadable by every
 //! command), DIR/sheet.png (photo | [M's relighting | E's maps] | re-render | ×4 error),
 //! DIR/relit.png (the maps under eight new flash positions) and DIR/capture.json (geometry,
@@ -15,9 +16,11 @@ use std::path::PathBuf;
 use anyhow::Context;
 use candle_core::Device;
 use photomat_capture::{
-    CaptureOptions, FOV_RANGE, GanPrior, PriorOptions, capture_with_prior, write_capture,
+    CaptureOptions, FOV_RANGE, GanPrior, PriorOptions, capture_auto, capture_with_prior,
+    write_capture,
 };
 use photomat_core::{FolderLock, lookup};
+use photomat_estimator::sample::choice::DEFAULT_TOLERANCE;
 
 use crate::common::{model_dir, parse_pair, steps_bar};
 
@@ -28,9 +31,17 @@ pub struct Args {
     #[arg(value_name = "PHOTO")]
     pub photo: PathBuf,
 
-    /// BRDF model of the maps, e.g. ggx or "height(ggx)" (`photomat brdfs` lists them).
-    #[arg(long, value_name = "SPEC")]
+    /// BRDF model of the maps, e.g. ggx or "height(ggx)" (`photomat brdfs` lists them), or
+    /// `auto`: the cheapest model (fewest map channels) the model folder has an estimator for
+    /// whose decoding of the inverted generator is within --tolerance of the best one's L1
+    /// (linear radiance) against the photo; implies --prior. capture.json and material.json
+    /// record the choice and every candidate's error.
+    #[arg(long, value_name = "SPEC|auto")]
     pub brdf: String,
+
+    /// With --brdf auto: accepted L1 above the best model's, relative (0.1 = 10 %).
+    #[arg(long, value_name = "T", default_value_t = DEFAULT_TOLERANCE, value_parser = parse_weight)]
+    pub tolerance: f64,
 
     /// Output folder (created and locked while it is written).
     #[arg(long, value_name = "DIR")]
@@ -105,7 +116,12 @@ fn parse_pixel(text: &str) -> Result<(f64, f64), String> {
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let brdf = lookup(&args.brdf).context("invalid --brdf")?;
+    let auto = args.brdf.trim() == "auto";
+    let brdf = if auto {
+        None
+    } else {
+        Some(lookup(&args.brdf).context("invalid --brdf")?)
+    };
     let bytes = std::fs::read(&args.photo)
         .with_context(|| format!("cannot read '{}'", args.photo.display()))?;
     let defaults = CaptureOptions::default();
@@ -123,21 +139,26 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             .map_or(PriorOptions::default().steps, |k| k as usize),
         ..PriorOptions::default()
     };
-    let prior = if !(args.prior || args.model.is_some()) {
-        None
-    } else {
-        let dir = model_dir(args.model.as_deref())?;
-        let prior = GanPrior::open(&dir, &brdf, &Device::Cpu)?;
-        if prior.is_none() {
-            writeln!(
-                out,
-                "note: '{}' has no estimator for {}: fitting from constant maps (train one \
-                 with `photomat train-estimator --gan {0} --brdf '{1}' --out {0}/estimators/NAME`)",
-                dir.display(),
-                brdf.name()
-            )?;
+    let prior = match &brdf {
+        _ if !(auto || args.prior || args.model.is_some()) => None,
+        None => {
+            let dir = model_dir(args.model.as_deref())?;
+            Some(GanPrior::open_all(&dir, &Device::Cpu)?)
         }
-        prior
+        Some(brdf) => {
+            let dir = model_dir(args.model.as_deref())?;
+            let prior = GanPrior::open(&dir, brdf, &Device::Cpu)?;
+            if prior.is_none() {
+                writeln!(
+                    out,
+                    "note: '{}' has no estimator for {}: fitting from constant maps (train one \
+                     with `photomat train-estimator --gan {0} --brdf '{1}' --out {0}/estimators/NAME`)",
+                    dir.display(),
+                    brdf.name()
+                )?;
+            }
+            prior
+        }
     };
     let _lock = FolderLock::acquire(&args.out, "photomat capture")?;
     let prior_steps = if prior.is_some() {
@@ -148,22 +169,29 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let bar = steps_bar((prior_steps + options.steps) as u64, 0);
     let name = args.photo.display().to_string();
     let prior_arg = prior.as_ref().map(|p| (p, &prior_options));
-    let result = capture_with_prior(
-        &bytes,
-        &name,
-        &brdf,
-        &options,
-        prior_arg,
-        &mut |step, loss| {
-            let phase = if step <= prior_steps {
-                "inversion"
-            } else {
-                "refinement"
-            };
-            bar.set_position(step as u64);
-            bar.set_message(format!("{phase} loss {loss:.4}"));
-        },
-    );
+    let mut show = |step: usize, loss: f64| {
+        let phase = if step <= prior_steps {
+            "inversion"
+        } else {
+            "refinement"
+        };
+        bar.set_position(step as u64);
+        bar.set_message(format!("{phase} loss {loss:.4}"));
+    };
+    let result = match (&brdf, prior_arg) {
+        (Some(brdf), prior_arg) => {
+            capture_with_prior(&bytes, &name, brdf, &options, prior_arg, &mut show)
+        }
+        (None, Some(prior_arg)) => capture_auto(
+            &bytes,
+            &name,
+            &options,
+            prior_arg,
+            args.tolerance,
+            &mut show,
+        ),
+        (None, None) => unreachable!("--brdf auto always opens the model folder"),
+    };
     bar.finish_and_clear();
     let result = result?;
     write_capture(&result, &args.out)?;
@@ -174,7 +202,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
          flash above pixel ({row:.1}, {col:.1}) by {}, gain {:.3}): \
          loss {:.4} → {:.4} in {} steps, {:.1} s",
         name,
-        brdf.name(),
+        result.brdf.name(),
         options.size,
         result.side,
         result.fov_degrees,
@@ -195,6 +223,21 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             inversion.losses.last().copied().unwrap_or(f64::NAN),
             inversion.losses.len(),
             inversion.seconds
+        )?;
+    }
+    if let Some(selection) = &result.selection {
+        let errors: Vec<String> = selection
+            .candidates
+            .iter()
+            .map(|c| format!("{} {:.4}", c.brdf, c.l1_linear))
+            .collect();
+        writeln!(
+            out,
+            "  --brdf auto (tolerance {}): {} of {} (linear L1 of E's maps: {})",
+            selection.tolerance,
+            selection.chosen,
+            selection.candidates.len(),
+            errors.join(", ")
         )?;
     }
     let dir = args.out.display();
