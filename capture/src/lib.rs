@@ -32,8 +32,9 @@
 //! inverts the generator to the photo and decodes what it finds with the estimator
 //! ([`prior`]), then refines those maps by the same loss, optionally held near them by an
 //! anchor term `μ · mean |θ − θ₀|`. [`capture_auto`] chooses the model as well: the cheapest
-//! of the folder's estimators whose decoding of the inverted generator matches the photo
-//! within a tolerance of the best one's (docs/capture.md, "Choosing the model").
+//! of the folder's estimators whose decoding of the inverted generator reproduces M's
+//! relighting of it, under the photo's flash and eight others, within a tolerance of the best
+//! one's (docs/capture.md, "Choosing the model").
 //!
 //! [`evaluate`] holds the measures of a capture against known maps (docs/capture.md,
 //! "Validation on photos this project did not make").
@@ -228,8 +229,9 @@ pub fn capture_with_prior(
 /// [`capture_with_prior`] in the model the photo needs, chosen among the prior's estimators
 /// (`--brdf auto`; docs/capture.md, "Choosing the model"): the generator is inverted once,
 /// every estimator decodes the found material, each decoding is rendered under the photo's
-/// flash, and the cheapest model whose error against the photo is within `tolerance` of the
-/// best one's ([`photomat_estimator::sample::choice::choose`], linear-radiance L1) is
+/// flash and the eight [`new_flash_positions`] and compared with M's relighting of the found
+/// material under the same lights, and the cheapest model whose error is within `tolerance`
+/// of the best one's ([`photomat_estimator::sample::choice::choose`], linear-radiance L1) is
 /// refined. Returns the capture, whose [`Capture::selection`] records every candidate.
 pub fn capture_auto(
     bytes: &[u8],
@@ -245,7 +247,15 @@ pub fn capture_auto(
     }
     let input = prepare_input(bytes, name, options)?;
     let inversion = invert(&input, name, prior, prior_options, progress)?;
-    let photo_linear = input.photo.powf(DISPLAY_GAMMA)?;
+    // The photo's flash and the eight new ones: M's relighting of the inverted material is
+    // what each decoding must reproduce, under lights the photo did not show as well.
+    let (row, col) = input.highlight.pixel;
+    let mut lights = vec![Highlight::from_pixel_on(row, col, input.size, input.side)];
+    lights.extend(new_flash_positions(input.side));
+    let geometry =
+        FlashGeometry::with_side(&lights, input.size, input.side, DType::F32, &Device::Cpu)?;
+    let target = prior.relight(&inversion, &geometry.omega)?;
+    let target_linear = target.powf(DISPLAY_GAMMA)?;
     let radiance_gain = inversion.display_gain.powf(DISPLAY_GAMMA);
     let mut candidates = Vec::new();
     let mut decoded = Vec::new();
@@ -253,14 +263,13 @@ pub fn capture_auto(
         let brdf = estimator.brdf().clone();
         let raw = estimator.estimator().forward(&inversion.features)?.detach();
         let maps = brdf.decode(&raw)?.with_texel_size(Some(input.texel));
-        let radiance =
-            (render_radiance_with(brdf.as_ref(), &maps, &input.geometry)? * radiance_gain)?;
-        let l1 = (encode_display(&radiance)? - &input.photo)?
+        let radiance = (render_radiance_with(brdf.as_ref(), &maps, &geometry)? * radiance_gain)?;
+        let l1 = (encode_display(&radiance)? - &target)?
             .abs()?
             .mean_all()?
             .to_scalar::<f32>()? as f64;
-        // The photo's own range: clipped highlights stay clipped in both.
-        let l1_linear = (radiance.clamp(0.0, 1.0)? - &photo_linear)?
+        // M's relighting is clamped to the display range; so is the render it is compared to.
+        let l1_linear = (radiance.clamp(0.0, 1.0)? - &target_linear)?
             .abs()?
             .mean_all()?
             .to_scalar::<f32>()? as f64;

@@ -134,6 +134,22 @@ impl GanPrior {
             .transpose()
     }
 
+    /// M's relighting of the inverted material under every light of `omega` (L, 3, N, N),
+    /// with the inversion's gain, as display values clamped to [0, 1]: (L, 3, N, N). One
+    /// light at a time, so memory stays that of one relighting.
+    pub fn relight(&self, inversion: &Inversion, omega: &Tensor) -> anyhow::Result<Tensor> {
+        let lights = omega.dim(0)?;
+        let mut relit = Vec::with_capacity(lights);
+        for k in 0..lights {
+            let encoded = self
+                .gan
+                .relight()
+                .forward(&inversion.features, &omega.narrow(0, k, 1)?)?;
+            relit.push((encoded.affine(0.5, 0.5)? * inversion.display_gain)?.clamp(0f32, 1f32)?);
+        }
+        Ok(Tensor::cat(&relit, 0)?)
+    }
+
     /// Sides a prior capture may have are multiples of this: G's cell size and the
     /// estimators' total stride, whichever is largest (all are powers of two).
     pub fn size_multiple(&self) -> usize {
