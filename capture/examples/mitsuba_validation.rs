@@ -13,10 +13,11 @@
 //! ```
 //! MODEL: a model folder with an estimator for `height(ggx, scale=0.02)` (e.g. models/demo).
 //! Each photo is captured at its own 320² with its true field of view and the default
-//! detector's highlight. Measures ([`photomat_capture::evaluate`]): the display L1 under the
+//! detector's highlight; FIRST and COUNT take a slice of the set (to run halves side by side). Measures ([`photomat_capture::evaluate`]): the display L1 under the
 //! photo's flash (against the photo) and under the eight held-out flashes (against Mitsuba's
 //! renders of the true material, registered to the photo's pixels), each after one
-//! per-channel scale; the per-map RMSEs and the mean normal error in degrees. SHEET, when
+//! per-channel scale; the per-map RMSEs (diffuse and specular after the colour scale of the
+//! held-out renders) and the mean normal error in degrees. SHEET, when
 //! given, gets a row per photo: photo | truth, direct, E only, prior under held-out flash 0 |
 //! truth's, direct's and prior's normals.
 
@@ -63,10 +64,11 @@ fn score(
     let (truth_brdf, truth_maps, truth_held) = truth;
     let input = radiance_on_square(brdf, maps, &[photo_flash], side)?;
     let held = radiance_on_square(brdf, maps, lights, side)?;
+    let scale = channel_scale(&held, truth_held)?;
     Ok(Scored {
         input_l1: held_out_l1(&input, photo_linear)?,
         held_l1: held_out_l1(&held, truth_held)?,
-        maps: map_errors(brdf, maps, truth_brdf, truth_maps)?,
+        maps: map_errors(brdf, maps, &scale, truth_brdf, truth_maps)?,
         held,
         normal: brdf.shading_maps(maps)?.get("normal")?.clone(),
     })
@@ -91,19 +93,25 @@ fn shown_normal(n: &Tensor) -> anyhow::Result<PlanarImage> {
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: mitsuba_validation CAPVAL MODEL [SHEET.png]";
+    let usage = "usage: mitsuba_validation CAPVAL MODEL [SHEET.png [FIRST COUNT]]";
     let set = PathBuf::from(args.first().context(usage)?);
     let model = PathBuf::from(args.get(1).context(usage)?);
     let sheet = args.get(2).map(PathBuf::from);
+    let first: usize = args.get(3).map_or(Ok(0), |s| s.parse())?;
+    let count: usize = args.get(4).map_or(Ok(usize::MAX), |s| s.parse())?;
 
     let brdf = lookup("height(ggx, scale=0.02)")?;
     let prior = GanPrior::open(&model, &brdf, &Device::Cpu)?
         .with_context(|| format!("'{}' has no estimator for {}", model.display(), brdf.name()))?;
     let record: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(set.join("simulation.json"))?)?;
-    let photos = record["photos"]
+    let photos: Vec<&serde_json::Value> = record["photos"]
         .as_array()
-        .context("simulation.json: no photos")?;
+        .context("simulation.json: no photos")?
+        .iter()
+        .skip(first)
+        .take(count)
+        .collect();
     println!(
         "{SIZE}² captures in {}, {} + {} steps; display L1 under the photo's flash / 8 held-out flashes; \
          diffuse, specular, roughness RMSE; normal error (°)",
@@ -117,7 +125,7 @@ fn main() -> anyhow::Result<()> {
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     let mut totals = [[0.0f64; 6]; 4];
     let mut rows = Vec::new();
-    for photo in photos {
+    for photo in &photos {
         let name = photo["photo"].as_str().context("no photo")?;
         let texture = photo["family"].as_str().unwrap_or("?");
         let fov = photo["camera"]["fov_deg"].as_f64().context("no fov_deg")?;

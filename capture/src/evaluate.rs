@@ -4,7 +4,8 @@
 //!
 //! One photo under one flash with unknown exposure and white balance fixes neither the
 //! absolute brightness nor the colour balance of the maps, so both measures first take out one
-//! per-channel scale (what a user corrects with a single colour picker), and only then compare.
+//! per-channel scale, the colour scale (what a user corrects with a single colour picker): the
+//! one that gives the fit's held-out renders the truth's channel means ([`channel_scale`]).
 
 use candle_core::{D, DType, Device, Tensor};
 use photomat_core::render::render_radiance_with;
@@ -63,10 +64,9 @@ pub fn held_out_l1(fitted: &Tensor, truth: &Tensor) -> anyhow::Result<f64> {
 /// Per-map errors of fitted maps against known ones.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MapErrors {
-    /// RMSE of the diffuse albedo, after the per-channel scale that gives it the truth's
-    /// channel means (module docs).
+    /// RMSE of the diffuse albedo, after the colour scale (module docs).
     pub diffuse_rmse: f64,
-    /// RMSE of the specular F0, after the same scale as the diffuse (one exposure scales both).
+    /// RMSE of the specular F0, after the same scale (one exposure scales both).
     pub specular_rmse: f64,
     /// RMSE of the perceptual roughness (α = r²).
     pub roughness_rmse: f64,
@@ -75,11 +75,17 @@ pub struct MapErrors {
 }
 
 /// Compares the shading maps (`Brdf::shading_maps`: a height model's normals derived) of
-/// `fitted` under `fitted_brdf` with those of `truth` under `truth_brdf`. Both must have
-/// `diffuse`, `specular`, `roughness` and (after shading) `normal` maps of the same size.
+/// `fitted` under `fitted_brdf` with those of `truth` under `truth_brdf`, the fitted diffuse
+/// and specular multiplied by `scale` (1, 3, 1, 1) first: the colour scale that gives the
+/// fit's renders the truth's channel means ([`channel_scale`] of the two renders under the
+/// same lights), since radiance is linear in both maps. (A scale taken from the diffuse maps
+/// alone blows up when a fit puts its light in the specular and leaves the diffuse near
+/// black.) Both must have `diffuse`, `specular`, `roughness` and (after shading) `normal`
+/// maps of the same size.
 pub fn map_errors(
     fitted_brdf: &Brdf,
     fitted: &MaterialMaps,
+    scale: &Tensor,
     truth_brdf: &Brdf,
     truth: &MaterialMaps,
 ) -> anyhow::Result<MapErrors> {
@@ -88,7 +94,6 @@ pub fn map_errors(
     let rmse = |a: &Tensor, b: &Tensor| -> anyhow::Result<f64> {
         Ok(((a - b)?.sqr()?.mean_all()?.to_scalar::<f32>()? as f64).sqrt())
     };
-    let scale = channel_scale(fitted.get("diffuse")?, truth.get("diffuse")?)?;
     let scaled =
         |name: &str| -> anyhow::Result<Tensor> { Ok(fitted.get(name)?.broadcast_mul(&scale)?) };
     let cosine = (fitted.get("normal")? * truth.get("normal")?)?
@@ -140,9 +145,11 @@ mod tests {
         // Twice as bright, normals tilted by 10° about x.
         let tilt = 10f32.to_radians();
         let fitted = maps(0.8, [0.0, tilt.sin(), tilt.cos()]);
-        let e = map_errors(&brdf, &fitted, &brdf, &truth).unwrap();
+        // Renders twice as bright as the truth's get the scale ½.
+        let scale = Tensor::full(0.5f32, (1, 3, 1, 1), &Device::Cpu).unwrap();
+        let e = map_errors(&brdf, &fitted, &scale, &brdf, &truth).unwrap();
         assert!(e.diffuse_rmse < 1e-6, "{e:?}");
-        // The scale that fixes the diffuse (×½) makes the fitted F0 0.02.
+        // The same scale makes the fitted F0 0.02.
         assert!((e.specular_rmse - 0.02).abs() < 1e-6, "{e:?}");
         assert!(e.roughness_rmse < 1e-6, "{e:?}");
         assert!((e.normal_degrees - 10.0).abs() < 1e-3, "{e:?}");
