@@ -95,7 +95,7 @@ pub fn map_errors(
         Ok(((a - b)?.sqr()?.mean_all()?.to_scalar::<f32>()? as f64).sqrt())
     };
     let scaled =
-        |name: &str| -> anyhow::Result<Tensor> { Ok(fitted.get(name)?.broadcast_mul(&scale)?) };
+        |name: &str| -> anyhow::Result<Tensor> { Ok(fitted.get(name)?.broadcast_mul(scale)?) };
     let cosine = (fitted.get("normal")? * truth.get("normal")?)?
         .sum_keepdim(1)?
         // Unit vectors' dot products may exceed 1 by rounding; acos needs [−1, 1].
