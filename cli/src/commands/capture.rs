@@ -34,8 +34,9 @@ pub struct Args {
     /// BRDF model of the maps, e.g. ggx or "height(ggx)" (`photomat brdfs` lists them), or
     /// `auto`: the cheapest model (fewest map channels) the model folder has an estimator for
     /// whose decoding of the inverted generator is within --tolerance of the best one's L1
-    /// (linear radiance) against the photo; implies --prior. capture.json and material.json
-    /// record the choice and every candidate's error.
+    /// (linear radiance) against M's relighting of it, under the photo's flash and eight
+    /// others; implies --prior. capture.json and material.json record the choice and every
+    /// candidate's error.
     #[arg(long, value_name = "SPEC|auto")]
     pub brdf: String,
 
