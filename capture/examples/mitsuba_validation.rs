@@ -29,9 +29,7 @@ use photomat_brdfs as _; // link the built-in BRDF plugins
 use photomat_capture::evaluate::{
     MapErrors, channel_scale, held_out_l1, map_errors, radiance_on_square,
 };
-use photomat_capture::{
-    CaptureOptions, GanPrior, PriorOptions, capture, capture_with_prior, square_side,
-};
+use photomat_capture::{CaptureOptions, GanPrior, PriorOptions, capture, capture_with_prior};
 use photomat_core::image_io::{PlanarImage, PngBits, read_exr, write_png};
 use photomat_core::map_files::load_maps;
 use photomat_core::render::DISPLAY_GAMMA;
@@ -150,7 +148,7 @@ fn main() -> anyhow::Result<()> {
         }
         let truth_held = Tensor::cat(&truth_held, 0)?;
         let bytes = std::fs::read(set.join(name))?;
-        let options = CaptureOptions {
+        let mut options = CaptureOptions {
             size: SIZE,
             fov_degrees: fov,
             ..CaptureOptions::default()
@@ -164,20 +162,13 @@ fn main() -> anyhow::Result<()> {
         );
         // A photo whose highlight the detector does not find is captured at the true one, and
         // the table says so (its highlight error reads "miss").
-        let (options, detected) = match capture(&bytes, name, &brdf, &options, &mut |_, _| {}) {
-            Ok(direct) => (options, Ok(direct)),
+        let direct = match capture(&bytes, name, &brdf, &options, &mut |_, _| {}) {
+            Ok(direct) => direct,
             Err(error) => {
                 eprintln!("{error:#}: capturing at the true highlight");
-                let given = CaptureOptions {
-                    highlight: Some(true_px),
-                    ..options
-                };
-                (given, Err(error))
+                options.highlight = Some(true_px);
+                capture(&bytes, name, &brdf, &options, &mut |_, _| {})?
             }
-        };
-        let direct = match detected {
-            Ok(direct) => direct,
-            Err(_) => capture(&bytes, name, &brdf, &options, &mut |_, _| {})?,
         };
         let with_prior = capture_with_prior(
             &bytes,
@@ -188,7 +179,7 @@ fn main() -> anyhow::Result<()> {
             &mut |_, _| {},
         )?;
         let prior_used = with_prior.prior.as_ref().context("no prior used")?;
-        let side = square_side(fov, SIZE, SIZE);
+        let side = direct.side;
         let texel = side / SIZE as f64;
         let (row, col) = direct.highlight.pixel;
         let detector_px = if options.highlight.is_some() {
@@ -206,44 +197,10 @@ fn main() -> anyhow::Result<()> {
             )?)?
             .with_texel_size(Some(texel));
         let truth_ref = (&truth.brdf, &truth.maps, &truth_held);
-        let scored = [
-            score(
-                &brdf,
-                &constant,
-                flash,
-                &photo_linear,
-                &lights,
-                side,
-                truth_ref,
-            )?,
-            score(
-                &brdf,
-                &direct.maps,
-                flash,
-                &photo_linear,
-                &lights,
-                side,
-                truth_ref,
-            )?,
-            score(
-                &brdf,
-                &prior_used.maps,
-                flash,
-                &photo_linear,
-                &lights,
-                side,
-                truth_ref,
-            )?,
-            score(
-                &brdf,
-                &with_prior.maps,
-                flash,
-                &photo_linear,
-                &lights,
-                side,
-                truth_ref,
-            )?,
-        ];
+        let scored = [&constant, &direct.maps, &prior_used.maps, &with_prior.maps]
+            .into_iter()
+            .map(|maps| score(&brdf, maps, flash, &photo_linear, &lights, side, truth_ref))
+            .collect::<anyhow::Result<Vec<_>>>()?;
         let seconds = [
             0.0,
             direct.seconds,
