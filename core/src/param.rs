@@ -110,6 +110,36 @@ impl ParamSpec {
             }
         })
     }
+
+    /// The raw output that [`ParamSpec::decode`] maps to the physical `value` (one entry
+    /// per channel), e.g. to start an optimisation at the model's [`ParamSpec::default`]s.
+    /// Values are clamped just inside the range first, since tanh reaches neither end;
+    /// a unit normal `n` (n_z > 0) is written as `(atanh(n_x/2), atanh(n_y/2),
+    /// atanh(n_z − 1))`, which decodes to `normalize(n/2) = n`.
+    pub fn raw_for(&self, value: &[f32]) -> Vec<f32> {
+        // 1e-4 of the range from either end: atanh stays below 5 and its decoded value
+        // within 1e-4 of the asked one.
+        const INSIDE: f32 = 1e-4;
+        let atanh = |y: f32| 0.5 * ((1.0 + y) / (1.0 - y)).ln();
+        let (lo, hi) = self.range;
+        let unit = |v: f32| ((v - lo) / (hi - lo)).clamp(INSIDE, 1.0 - INSIDE);
+        match self.encoding {
+            Encoding::Linear => value.iter().map(|&v| atanh(2.0 * unit(v) - 1.0)).collect(),
+            Encoding::Gamma22 => value
+                .iter()
+                .map(|&v| atanh(2.0 * unit(v).powf(1.0 / 2.2) - 1.0))
+                .collect(),
+            Encoding::UnitNormal => {
+                let half = |v: f32| (0.5 * v).clamp(INSIDE - 1.0, 1.0 - INSIDE);
+                let z = (value[2] as f64).max(NORMAL_Z_FLOOR) as f32;
+                vec![
+                    atanh(half(value[0])),
+                    atanh(half(value[1])),
+                    atanh((z - 1.0).clamp(INSIDE - 1.0, 0.0)),
+                ]
+            }
+        }
+    }
 }
 
 /// Total channel count `n` of a list of specs: the estimator's output width.

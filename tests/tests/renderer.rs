@@ -201,6 +201,37 @@ fn decode_gives_maps_that_validate_for_every_model() {
 }
 
 #[test]
+fn raw_for_inverts_decode_for_every_map_of_every_model() {
+    // Each spec's defaults, and values near both ends of its range (a normal tilted 60°),
+    // decode back from `raw_for` to within 1e-3.
+    for spec in &photomat_tests::models_under_test() {
+        let brdf = model(spec);
+        for p in brdf.params() {
+            let (lo, hi) = p.range;
+            let tilted = [0.75f32.sqrt() * 0.6, -(0.75f32.sqrt()) * 0.8, 0.5];
+            let cases: Vec<Vec<f32>> = if p.encoding == photomat_core::Encoding::UnitNormal {
+                vec![p.default.to_vec(), tilted.to_vec()]
+            } else {
+                vec![
+                    p.default.to_vec(),
+                    vec![lo + 0.01 * (hi - lo); p.channels],
+                    vec![lo + 0.97 * (hi - lo); p.channels],
+                ]
+            };
+            for want in cases {
+                let raw = p.raw_for(&want);
+                let raw = Tensor::from_vec(raw, (1, p.channels, 1, 1), &Device::Cpu).unwrap();
+                let got = values(&p.decode(&raw).unwrap());
+                for (g, w) in got.iter().zip(&want) {
+                    let tol = 1e-3 * (hi - lo) as f64;
+                    assert!((g - *w as f64).abs() < tol, "{spec}.{}: {g} vs {w}", p.name);
+                }
+            }
+        }
+    }
+}
+
+#[test]
 fn renderer_rejects_bad_maps_with_clear_errors() {
     let brdf = model("ggx");
     let good = MaterialMaps::defaults(brdf.params(), 1, 8, DType::F32, &Device::Cpu).unwrap();
