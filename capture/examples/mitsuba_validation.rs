@@ -21,16 +21,16 @@
 //! given, gets a row per photo: photo | truth, direct, E only, prior under held-out flash 0 |
 //! truth's, direct's and prior's normals.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use anyhow::Context;
 use candle_core::{DType, Device, Tensor};
 use photomat_brdfs as _; // link the built-in BRDF plugins
 use photomat_capture::evaluate::{
-    MapErrors, channel_scale, held_out_l1, map_errors, radiance_on_square,
+    MapErrors, channel_scale, held_out_l1, map_errors, radiance_on_square, read_held_out,
 };
 use photomat_capture::{CaptureOptions, GanPrior, PriorOptions, capture, capture_with_prior};
-use photomat_core::image_io::{PlanarImage, PngBits, read_exr, write_png};
+use photomat_core::image_io::{PlanarImage, PngBits, write_png};
 use photomat_core::map_files::load_maps;
 use photomat_core::render::DISPLAY_GAMMA;
 use photomat_core::sheet::grid;
@@ -70,10 +70,6 @@ fn score(
         held,
         normal: brdf.shading_maps(maps)?.get("normal")?.clone(),
     })
-}
-
-fn read_linear(path: &Path) -> anyhow::Result<Tensor> {
-    Ok(read_exr(path)?.to_tensor(&Device::Cpu)?)
 }
 
 /// Display image of one linear render, exposed like the held-out measure's truth.
@@ -133,20 +129,7 @@ fn main() -> anyhow::Result<()> {
                 .context("no truth: render the set with `validation/run.sh --capture-set`")?,
         );
         let truth = load_maps(&truth_dir, None)?;
-        let held_out = photo["held_out"].as_array().context("no held_out")?;
-        let mut lights = Vec::new();
-        let mut truth_held = Vec::new();
-        for h in held_out {
-            let xy = h["highlight"].as_array().context("no highlight")?;
-            lights.push(Highlight::new(
-                xy[0].as_f64().context("x")?,
-                xy[1].as_f64().context("y")?,
-            ));
-            truth_held.push(read_linear(
-                &set.join(h["render"].as_str().context("no render")?),
-            )?);
-        }
-        let truth_held = Tensor::cat(&truth_held, 0)?;
+        let (lights, truth_held) = read_held_out(&set, photo)?;
         let bytes = std::fs::read(set.join(name))?;
         let mut options = CaptureOptions {
             size: SIZE,

@@ -7,7 +7,11 @@
 //! per-channel scale, the colour scale (what a user corrects with a single colour picker): the
 //! one that gives the fit's held-out renders the truth's channel means ([`channel_scale`]).
 
+use std::path::Path;
+
+use anyhow::Context;
 use candle_core::{D, DType, Device, Tensor};
+use photomat_core::image_io::read_exr;
 use photomat_core::render::render_radiance_with;
 use photomat_core::{Brdf, FlashGeometry, Highlight, MaterialMaps, encode_display};
 
@@ -27,6 +31,38 @@ pub fn radiance_on_square(
     let (_, n, _) = maps.batch_and_size()?;
     let geometry = FlashGeometry::with_side(lights, n, side, DType::F32, &Device::Cpu)?;
     Ok(render_radiance_with(brdf.as_ref(), maps, &geometry)?)
+}
+
+/// The held-out flashes of one photo of a Mitsuba capture set (`validation/run.sh
+/// --capture-set`, validation/README.md: `photo` is its entry in `simulation.json`, whose
+/// `held_out` list gives each flash position on the square and its render): the lights, and
+/// the true material's linear renders under them, (L, 3, N, N).
+pub fn read_held_out(
+    set: &Path,
+    photo: &serde_json::Value,
+) -> anyhow::Result<(Vec<Highlight>, Tensor)> {
+    let name = photo["photo"].as_str().unwrap_or("?");
+    let held_out = photo["held_out"].as_array().with_context(|| {
+        format!("{name}: no held_out; render the set with `validation/run.sh --capture-set`")
+    })?;
+    let mut lights = Vec::new();
+    let mut renders = Vec::new();
+    for h in held_out {
+        let xy = h["highlight"]
+            .as_array()
+            .with_context(|| format!("{name}: a held-out flash without its highlight"))?;
+        let coordinate = |i: usize| {
+            xy.get(i)
+                .and_then(|v| v.as_f64())
+                .with_context(|| format!("{name}: a held-out highlight is not [x, y]"))
+        };
+        lights.push(Highlight::new(coordinate(0)?, coordinate(1)?));
+        let render = h["render"]
+            .as_str()
+            .with_context(|| format!("{name}: a held-out flash without its render"))?;
+        renders.push(read_exr(&set.join(render))?.to_tensor(&Device::Cpu)?);
+    }
+    Ok((lights, Tensor::cat(&renders, 0)?))
 }
 
 /// Per-channel means of a (B, 3, H, W) tensor over everything else: (1, 3, 1, 1).

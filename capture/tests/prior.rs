@@ -8,8 +8,8 @@ use std::path::PathBuf;
 use candle_core::{DType, Device, Tensor};
 use photomat_brdfs as _; // link the built-in models
 use photomat_capture::{
-    CaptureOptions, GanPrior, PriorOptions, TRAINING_FOV_DEGREES, capture_auto, capture_with_prior,
-    write_capture,
+    CaptureOptions, Exports, GanPrior, PriorOptions, TRAINING_FOV_DEGREES, capture_auto,
+    capture_with_prior, write_capture,
 };
 use photomat_core::flash::PHOTO_SIDE;
 use photomat_core::image_io::{PlanarImage, PngBits, encode_png, png_header};
@@ -100,7 +100,11 @@ fn the_prior_inverts_the_generator_and_starts_the_refinement() {
     assert!(after < before, "refinement loss {before} → {after}");
 
     let dir = tempfile::tempdir().unwrap();
-    write_capture(&result, dir.path()).unwrap();
+    let textures = write_capture(&result, dir.path(), Exports::default()).unwrap();
+    // A height model's capture still gives renderers a normal map: the derived one.
+    assert_eq!(textures.normal.as_deref(), Some("normal.png"));
+    let (_, height, width) = png_header(&dir.path().join("export/normal.png")).unwrap();
+    assert_eq!((height, width), (SIZE, SIZE));
     let record: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("capture.json")).unwrap()).unwrap();
     assert_eq!(record["prior"]["steps"], 12);
@@ -203,7 +207,7 @@ fn auto_refines_the_cheapest_model_within_the_tolerance_and_records_every_candid
     assert_eq!(strict.brdf.name(), names[best]);
     // The folder records the choice in capture.json and material.json.
     let dir = tempfile::tempdir().unwrap();
-    write_capture(&strict, dir.path()).unwrap();
+    write_capture(&strict, dir.path(), Exports::default()).unwrap();
     let record: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("capture.json")).unwrap()).unwrap();
     assert_eq!(record["selection"]["chosen"], names[best].as_str());

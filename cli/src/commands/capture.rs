@@ -1,12 +1,15 @@
 //! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--size 256] [--steps 400] [--fov 67]
 //! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]
-//! [--tolerance T]`: one phone flash photo → maps of a named BRDF model. The fit is the
+//! [--tolerance T] [--warmup-steps 100] [--no-vignetting] [--uniform MAP,…] [--relief]
+//! [--gltf] [--mtlx]`:
+//! one phone flash photo → maps of a named BRDF model. The fit is the
 //! library's `photomat_capture::capture_with_prior` (docs/capture.md): from constant maps, or,
 //! with `--prior` or `--model`, from the model folder's generator prior when the folder has an
 //! estimator for SPEC; with `--brdf auto`, `photomat_capture::capture_auto` chooses the model
 //! among the folder's estimators. This command
 //! reads the file, locks DIR, shows progress and writes DIR/material/ (loadable by every
-//! command), DIR/sheet.png (photo | [M's relighting | E's maps] | re-render | ×4 error),
+//! command), DIR/export/ (renderer textures, and the glTF / MaterialX documents asked for),
+//! DIR/sheet.png (photo | [M's relighting | E's maps] | re-render | ×4 error),
 //! DIR/relit.png (the maps under eight new flash positions) and DIR/capture.json (geometry,
 //! highlight, gain, losses, timings).
 
@@ -16,7 +19,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use candle_core::Device;
 use photomat_capture::{
-    CaptureOptions, FOV_RANGE, GanPrior, PriorOptions, capture_auto, capture_with_prior,
+    CaptureOptions, Exports, FOV_RANGE, GanPrior, PriorOptions, capture_auto, capture_with_prior,
     write_capture,
 };
 use photomat_core::{FolderLock, lookup};
@@ -90,6 +93,40 @@ pub struct Args {
     /// [default: 0.05].
     #[arg(long, value_name = "MU", value_parser = parse_weight)]
     pub anchor: Option<f64>,
+
+    /// Maps fitted as one value over the whole photo, comma-separated (e.g. `height`: flat
+    /// normals; `specular,roughness`), so that they cannot paint the photo's highlight in.
+    /// The names are the model's maps (`photomat brdfs`) [default: none].
+    #[arg(long, value_name = "MAP,…", value_delimiter = ',')]
+    pub uniform: Vec<String>,
+
+    /// Steps of the uniform warm-up of a fit from constant maps: one value per map channel,
+    /// the exposure and the vignetting, fitted to the photo at 64² before the per-texel fit
+    /// starts from them (0: none, and no vignetting) [default: 100].
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(0..=100_000))]
+    pub warmup_steps: Option<u32>,
+
+    /// Take the photo as free of vignetting instead of fitting the lens's falloff (a
+    /// quadratic loss towards the corners) in the warm-up; capture.json records the fitted
+    /// strength.
+    #[arg(long)]
+    pub no_vignetting: bool,
+
+    /// Fit the relief (the height or normal map) texel by texel in a fit from constant maps.
+    /// Off by default: it is held flat, which relit independent test photos better under new
+    /// flashes than the relief one flash paints in (docs/capture.md, "Fit").
+    #[arg(long)]
+    pub relief: bool,
+
+    /// Also write export/material.gltf (glTF 2.0 with KHR_materials_specular) beside the
+    /// renderer textures that export/ always holds.
+    #[arg(long)]
+    pub gltf: bool,
+
+    /// Also write export/material.mtlx (MaterialX 1.38, UsdPreviewSurface) beside the
+    /// renderer textures.
+    #[arg(long)]
+    pub mtlx: bool,
 }
 
 /// A finite weight ≥ 0.
@@ -132,6 +169,12 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         highlight: args.highlight,
         fov_degrees: args.fov.unwrap_or(defaults.fov_degrees),
         anchor: args.anchor.unwrap_or(defaults.anchor),
+        uniform_maps: args.uniform.clone(),
+        relief: args.relief,
+        warmup_steps: args
+            .warmup_steps
+            .map_or(defaults.warmup_steps, |k| k as usize),
+        vignetting: defaults.vignetting && !args.no_vignetting,
         ..defaults
     };
     let prior_options = PriorOptions {
@@ -195,12 +238,16 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     };
     bar.finish_and_clear();
     let result = result?;
-    write_capture(&result, &args.out)?;
+    let exports = Exports {
+        gltf: args.gltf,
+        mtlx: args.mtlx,
+    };
+    let textures = write_capture(&result, &args.out, exports)?;
     let (row, col) = result.highlight.pixel;
     writeln!(
         out,
         "captured {} as {} ({}², a square of {:.3} at flash height 1 from a {}° field of view; \
-         flash above pixel ({row:.1}, {col:.1}) by {}, gain {:.3}): \
+         flash above pixel ({row:.1}, {col:.1}) by {}, gain {:.3}{}): \
          loss {:.4} → {:.4} in {} steps, {:.1} s",
         name,
         result.brdf.name(),
@@ -209,6 +256,9 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         result.fov_degrees,
         result.highlight.source,
         result.gain,
+        result
+            .vignetting
+            .map_or(String::new(), |a| format!(", vignetting {a:.3}")),
         result.losses.first().copied().unwrap_or(f64::NAN),
         result.losses.last().copied().unwrap_or(f64::NAN),
         result.losses.len(),
@@ -245,6 +295,17 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     writeln!(
         out,
         "  {dir}/material/  the maps (photomat render --maps {dir}/material --orbit 8)"
+    )?;
+    let documents = match (args.gltf, args.mtlx) {
+        (true, true) => " and material.{gltf,mtlx}",
+        (true, false) => " and material.gltf",
+        (false, true) => " and material.mtlx",
+        (false, false) => "",
+    };
+    writeln!(
+        out,
+        "  {dir}/export/  renderer textures ({}){documents}",
+        textures.files().join(", ")
     )?;
     let panels = if result.prior.is_some() {
         "photo | M's relighting | E's maps | re-render | ×4 error"

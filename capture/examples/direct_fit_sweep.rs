@@ -1,0 +1,171 @@
+//! Which options of the direct capture (from constant maps, no generator prior) relight
+//! best? Captures photos with known maps once per configuration and judges each fit by its
+//! renders under eight flash positions the photo did not show
+//! ([`photomat_capture::evaluate::held_out_l1`]).
+//!
+//! ```text
+//! cargo run --release -p photomat-capture --example direct_fit_sweep -- SET WARMUP[:FLAGS][,…] [FIRST COUNT]
+//! ```
+//! WARMUP is [`CaptureOptions::warmup_steps`]; FLAGS: `v` fits the vignetting, `u` holds
+//! specular and roughness uniform, `h` the height (flat normals).
+//! SET: either a Mitsuba capture set (`validation/run.sh --capture-set`: each photo has
+//! `held_out` renders and truth maps in its pixel grid; captured at 320² with its true field
+//! of view), or a `photomat simulate` folder (truth maps at the photo's resolution; captured
+//! at 256² with the simulator's 90°, the truth rendered at its own resolution and box-filtered
+//! to 256²). Both capture in `height(ggx, scale=0.02)` at the true highlight, so that the
+//! detector's misses do not enter the comparison. Mitsuba sets also get the per-map errors.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use photomat_brdfs as _; // link the built-in BRDF plugins
+use photomat_capture::evaluate::{
+    channel_scale, held_out_l1, map_errors, radiance_on_square, read_held_out,
+};
+use photomat_capture::{CaptureOptions, capture, new_flash_positions};
+use photomat_core::flash::PHOTO_SIDE;
+use photomat_core::map_files::load_maps;
+use photomat_core::{Highlight, lookup};
+
+fn main() -> anyhow::Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let usage = "usage: direct_fit_sweep SET WARMUP[:FLAGS][,…] [FIRST COUNT]";
+    let set = PathBuf::from(args.first().context(usage)?);
+    let configs: Vec<(usize, String)> = args
+        .get(1)
+        .context(usage)?
+        .split(',')
+        .filter(|s| !s.is_empty())
+        .map(|s| -> anyhow::Result<(usize, String)> {
+            let mut parts = s.split(':');
+            let warmup = parts.next().context(usage)?.parse()?;
+            let flags = parts.next().unwrap_or("").to_string();
+            Ok((warmup, flags))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let first: usize = args.get(2).map_or(Ok(0), |s| s.parse())?;
+    let count: usize = args.get(3).map_or(Ok(usize::MAX), |s| s.parse())?;
+    let brdf = lookup("height(ggx, scale=0.02)")?;
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(set.join("simulation.json"))?)?;
+    let photos: Vec<&serde_json::Value> = record["photos"]
+        .as_array()
+        .context("simulation.json: no photos")?
+        .iter()
+        .skip(first)
+        .take(count)
+        .collect();
+    println!(
+        "| photo | family | warm-up:flags | L1 input | L1 held-out | diffuse | specular | roughness | normal ° | seconds |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|");
+    let mut totals = vec![[0.0f64; 6]; configs.len()];
+    for photo in &photos {
+        let name = photo["photo"].as_str().context("no photo")?;
+        let family = photo["family"].as_str().unwrap_or("?");
+        let truth = load_maps(
+            &set.join(photo["truth"].as_str().context("no truth")?),
+            None,
+        )?;
+        let px = photo["highlight_px"]
+            .as_array()
+            .context("no highlight_px")?;
+        let (row, col) = (
+            px[0].as_f64().context("row")?,
+            px[1].as_f64().context("col")?,
+        );
+        let (_, full, _) = truth.maps.batch_and_size()?;
+        // Mitsuba sets: truth in the photo's grid, held-out renders on disk; simulator
+        // folders: truth at the photo's resolution, rendered here.
+        let (size, fov, lights, truth_held) = match photo.get("held_out") {
+            Some(_) => {
+                let (lights, renders) = read_held_out(&set, photo)?;
+                let fov = photo["camera"]["fov_deg"].as_f64().context("no fov_deg")?;
+                (full, fov, lights, renders)
+            }
+            None => {
+                let size = 256;
+                let lights = new_flash_positions(PHOTO_SIDE);
+                let maps = truth
+                    .maps
+                    .clone()
+                    .with_texel_size(Some(PHOTO_SIDE / full as f64));
+                let held = radiance_on_square(&truth.brdf, &maps, &lights, PHOTO_SIDE)?
+                    .avg_pool2d(full / size)?;
+                (size, 90.0, lights, held)
+            }
+        };
+        let scale_px = size as f64 / full as f64;
+        let bytes = std::fs::read(set.join(name))?;
+        if full == size {
+            // The floor of this renderer: the true maps themselves, rendered here.
+            let side = photomat_capture::square_side(fov, size, size);
+            let maps = truth.maps.clone().with_texel_size(Some(side / size as f64));
+            let held = radiance_on_square(&truth.brdf, &maps, &lights, side)?;
+            println!(
+                "| {name} | {family} | truth maps | | {:.4} | | | | | |",
+                held_out_l1(&held, &truth_held)?
+            );
+        }
+        for (w, (warmup, flags)) in configs.iter().enumerate() {
+            let options = CaptureOptions {
+                size,
+                fov_degrees: fov,
+                highlight: Some((row * scale_px, col * scale_px)),
+                warmup_steps: *warmup,
+                vignetting: flags.contains('v'),
+                uniform_maps: if flags.contains('u') {
+                    vec!["specular".into(), "roughness".into()]
+                } else {
+                    Vec::new()
+                },
+                relief: !flags.contains('h'),
+                ..CaptureOptions::default()
+            };
+            let fit = capture(&bytes, name, &brdf, &options, &mut |_, _| {})?;
+            let (r, c) = fit.highlight.pixel;
+            let flash = Highlight::from_pixel_on(r, c, size, fit.side);
+            let input = radiance_on_square(&brdf, &fit.maps, &[flash], fit.side)?;
+            let held = radiance_on_square(&brdf, &fit.maps, &lights, fit.side)?;
+            let input_l1 = held_out_l1(&input, &fit.photo.powf(2.2)?)?;
+            let held_l1 = held_out_l1(&held, &truth_held)?;
+            let errors = if full == size {
+                let scale = channel_scale(&held, &truth_held)?;
+                let e = map_errors(&brdf, &fit.maps, &scale, &truth.brdf, &truth.maps)?;
+                [
+                    e.diffuse_rmse,
+                    e.specular_rmse,
+                    e.roughness_rmse,
+                    e.normal_degrees,
+                ]
+            } else {
+                [f64::NAN; 4]
+            };
+            let values = [
+                input_l1, held_l1, errors[0], errors[1], errors[2], errors[3],
+            ];
+            for (t, v) in totals[w].iter_mut().zip(values) {
+                *t += v;
+            }
+            println!(
+                "| {name} | {family} | {warmup}:{flags} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} | {:.2} | {:.0} |",
+                values[0], values[1], values[2], values[3], values[4], values[5], fit.seconds
+            );
+        }
+    }
+    let n = photos.len() as f64;
+    for (w, (warmup, flags)) in configs.iter().enumerate() {
+        let t = totals[w];
+        println!(
+            "| mean of {} | | {warmup}:{flags} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} | {:.2} | |",
+            photos.len(),
+            t[0] / n,
+            t[1] / n,
+            t[2] / n,
+            t[3] / n,
+            t[4] / n,
+            t[5] / n
+        );
+    }
+    Ok(())
+}
