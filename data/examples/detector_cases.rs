@@ -16,7 +16,7 @@ fn main() -> anyhow::Result<()> {
     println!(
         "photo,width,truth_row,truth_col,robust_row,robust_col,paper_row,paper_col,robust_err_pct,\
          paper_err_pct,disagree_pct,robust_status,alpha,vignetting,beam,diffuse,specular,ambient,\
-         flash_share,robust_reason"
+         flash_share,misfit,fit_row,fit_col,fit_contrast,centroid_contrast,robust_reason"
     );
     for (i, entry) in dataset.photos().iter().enumerate() {
         let Some([row, col]) = entry.truth_highlight_px else {
@@ -28,9 +28,15 @@ fn main() -> anyhow::Result<()> {
         let p = paper.detect(&image)?;
         let fit = robust.fit(&image)?;
         let pct = |e: f64| 100.0 * e / w;
+        let fit_px = fit.map(|f| f.pixel(image.height, image.width));
+        let fit_contrast = match fit_px {
+            Some((r, c)) => Some(robust.local_contrast(&image, r, c)?),
+            None => None,
+        };
+        let centroid_contrast = robust.local_contrast(&image, p.row, p.col)?;
         let f = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
         println!(
-            "{},{w},{row:.2},{col:.2},{:.2},{:.2},{:.2},{:.2},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},\"{}\"",
+            "{},{w},{row:.2},{col:.2},{:.2},{:.2},{:.2},{:.2},{:.3},{:.3},{:.3},{},{},{},{},{},{},{},{},{},{},{},{},{:.4},\"{}\"",
             entry.image,
             r.row,
             r.col,
@@ -47,6 +53,11 @@ fn main() -> anyhow::Result<()> {
             f(fit.map(|f| f.coefficients[1])),
             f(fit.map(|f| f.coefficients[2])),
             f(fit.map(|f| f.flash_share)),
+            f(fit.map(|f| f.misfit)),
+            f(fit_px.map(|p| p.0)),
+            f(fit_px.map(|p| p.1)),
+            f(fit_contrast),
+            centroid_contrast,
             r.reason.as_deref().unwrap_or("").replace('"', "'"),
         );
     }
