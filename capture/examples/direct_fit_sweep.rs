@@ -4,10 +4,12 @@
 //! ([`photomat_capture::evaluate::held_out_l1`]).
 //!
 //! ```text
-//! cargo run --release -p photomat-capture --example direct_fit_sweep -- SET WARMUP[:FLAGS][,…] [FIRST COUNT]
+//! cargo run --release -p photomat-capture --example direct_fit_sweep -- SET WARMUP[:FLAGS][,…] [FIRST COUNT [SIZE]]
 //! ```
 //! WARMUP is [`CaptureOptions::warmup_steps`]; FLAGS: `v` fits the vignetting, `u` holds
-//! specular and roughness uniform, `h` the height (flat normals).
+//! specular and roughness uniform, `h` the height (flat normals), `f` runs every step at the
+//! full size (no coarse stage, [`CaptureOptions::full_size_steps`]). SIZE: the capture size
+//! of simulator folders (default 256).
 //! SET: either a Mitsuba capture set (`validation/run.sh --capture-set`: each photo has
 //! `held_out` renders and truth maps in its pixel grid; captured at 320² with its true field
 //! of view), or a `photomat simulate` folder (truth maps at the photo's resolution; captured
@@ -29,7 +31,7 @@ use photomat_core::{Highlight, lookup};
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
-    let usage = "usage: direct_fit_sweep SET WARMUP[:FLAGS][,…] [FIRST COUNT]";
+    let usage = "usage: direct_fit_sweep SET WARMUP[:FLAGS][,…] [FIRST COUNT [SIZE]]";
     let set = PathBuf::from(args.first().context(usage)?);
     let configs: Vec<(usize, String)> = args
         .get(1)
@@ -45,6 +47,7 @@ fn main() -> anyhow::Result<()> {
         .collect::<anyhow::Result<_>>()?;
     let first: usize = args.get(2).map_or(Ok(0), |s| s.parse())?;
     let count: usize = args.get(3).map_or(Ok(usize::MAX), |s| s.parse())?;
+    let sim_size: usize = args.get(4).map_or(Ok(256), |s| s.parse())?;
     let brdf = lookup("height(ggx, scale=0.02)")?;
     let record: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(set.join("simulation.json"))?)?;
@@ -84,7 +87,7 @@ fn main() -> anyhow::Result<()> {
                 (full, fov, lights, renders)
             }
             None => {
-                let size = 256;
+                let size = sim_size;
                 let lights = new_flash_positions(PHOTO_SIDE);
                 let maps = truth
                     .maps
@@ -120,6 +123,11 @@ fn main() -> anyhow::Result<()> {
                     Vec::new()
                 },
                 relief: !flags.contains('h'),
+                full_size_steps: if flags.contains('f') {
+                    usize::MAX
+                } else {
+                    CaptureOptions::default().full_size_steps
+                },
                 ..CaptureOptions::default()
             };
             let fit = capture(&bytes, name, &brdf, &options, &mut |_, _| {})?;

@@ -49,6 +49,11 @@
 //! stays flat through the refinement unless [`CaptureOptions::relief`] asks for it, and
 //! [`CaptureOptions::uniform_maps`] holds other named maps at one value as well.
 //!
+//! Large fits from constant maps start coarse: the first steps of a capture of at least twice
+//! [`CaptureOptions::coarse_min_size`] run on the photo box-filtered to a smaller size
+//! ([`coarse_factor`]), whose maps, upsampled, start the last
+//! [`CaptureOptions::full_size_steps`] at full size (docs/capture.md, "Fit").
+//!
 //! Not yet: camera tilt, and a fitted ambient term.
 
 pub mod camera;
@@ -68,6 +73,7 @@ use photomat_core::{Brdf, FlashGeometry, Highlight, MaterialMaps, encode_display
 use photomat_data::dataset::photo::{Framing, prepare_photo};
 use photomat_data::highlight::{DetectionStatus, DetectorKind};
 use photomat_estimator::sample::choice::{Candidate, Selection, choose};
+use photomat_kernels::fir::{AxisMatrix, separable};
 use photomat_train::{Adam, AdamConfig};
 use serde::Serialize;
 
@@ -157,6 +163,27 @@ pub struct CaptureOptions {
     /// the relief one flash paints in (docs/benchmarks.md, "The direct capture's uniform
     /// warm-up"). A capture with a prior keeps refining E's relief either way.
     pub relief: bool,
+    /// Of the [`Self::steps`], how many run at the full size when the capture has a coarse
+    /// stage (a fit from constant maps of at least twice [`Self::coarse_min_size`]); the
+    /// others run on the photo box-filtered to a smaller size ([`coarse_factor`]), a quarter
+    /// of the texels per halving, and their maps, upsampled, start the full-size steps.
+    /// Default 100.
+    pub full_size_steps: usize,
+    /// Smallest side of the coarse stage: the side is halved while the half is at least this
+    /// and the side is even. Default 512 (1024² → 512², 2048² → 512²): at 512² a step took
+    /// a quarter of a 1024² one's time on this project's 2-core machine, and the highlight's
+    /// lobe and the texture are still drawn (docs/benchmarks.md).
+    pub coarse_min_size: usize,
+}
+
+/// How many times the side of a `size`² capture is divided in its coarse stage: the largest
+/// power of two `f` that divides `size` with `size / f` ≥ `min_size` (1: no coarse stage).
+pub fn coarse_factor(size: usize, min_size: usize) -> usize {
+    let mut factor = 1;
+    while (size / factor).is_multiple_of(2) && size / factor / 2 >= min_size.max(1) {
+        factor *= 2;
+    }
+    factor
 }
 
 /// The maps that shape the shading normal, by their shared names (docs/conventions.md,
@@ -177,6 +204,8 @@ impl Default for CaptureOptions {
             vignetting: true,
             uniform_maps: Vec::new(),
             relief: false,
+            full_size_steps: 100,
+            coarse_min_size: 512,
         }
     }
 }
@@ -204,12 +233,23 @@ pub struct Capture {
     pub fov_degrees: f64,
     /// Loss after every refinement step.
     pub losses: Vec<f64>,
-    /// Wall seconds of the refinement.
+    /// Wall seconds of the refinement, its coarse stage included.
     pub seconds: f64,
+    /// The refinement's coarse stage, when it had one ([`CaptureOptions::full_size_steps`]);
+    /// its steps are the first of [`Self::losses`].
+    pub coarse: Option<CoarseStage>,
     /// The generator prior, when one was used.
     pub prior: Option<PriorUsed>,
     /// How the model was chosen, for a capture in `auto` ([`capture_auto`]).
     pub selection: Option<Selection>,
+}
+
+/// The coarse stage of a refinement: its side, steps and wall seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CoarseStage {
+    pub size: usize,
+    pub steps: usize,
+    pub seconds: f64,
 }
 
 /// What the generator prior of a capture did.
@@ -351,6 +391,38 @@ struct Input {
     /// The photo's flash, on the square of side `side`.
     light: Highlight,
     geometry: FlashGeometry,
+    /// Squared distance of every texel from the centre, for the vignetting ([`camera`]).
+    rho2: Tensor,
+}
+
+impl Input {
+    /// The central `n·factor` texels of the photo (`n = size / factor`; the centre moves by
+    /// half a texel at most) box-filtered by `factor` in linear light, as a sensor of n²
+    /// pixels would have seen them, with the flash geometry of that smaller square.
+    fn box_filtered(&self, factor: usize) -> anyhow::Result<Input> {
+        let n = self.size / factor;
+        let start = (self.size - n * factor) / 2;
+        let photo = encode_display(
+            &self
+                .photo
+                .narrow(2, start, n * factor)?
+                .narrow(3, start, n * factor)?
+                .powf(DISPLAY_GAMMA)?
+                .avg_pool2d(factor)?,
+        )?;
+        let side = self.side * (n * factor) as f64 / self.size as f64;
+        let geometry = FlashGeometry::with_side(&[self.light], n, side, DType::F32, &Device::Cpu)?;
+        Ok(Input {
+            photo,
+            size: n,
+            highlight: self.highlight.clone(),
+            side,
+            texel: side / n as f64,
+            light: self.light,
+            geometry,
+            rho2: camera::rho_squared(n)?,
+        })
+    }
 }
 
 /// Checks the options, decodes and resamples the photo and finds its highlight.
@@ -409,6 +481,7 @@ fn prepare_input(bytes: &[u8], name: &str, options: &CaptureOptions) -> anyhow::
         texel: side / n as f64,
         light,
         geometry,
+        rho2: camera::rho_squared(n)?,
     })
 }
 
@@ -490,15 +563,6 @@ fn refine(
         } else {
             (start_raw, start_log_gain, None)
         };
-    let Input {
-        photo,
-        highlight,
-        side,
-        texel,
-        geometry,
-        size,
-        ..
-    } = input;
     let offset = prior_used.as_ref().map_or(0, |p| p.inversion.losses.len());
     let mut held = options.uniform_maps.clone();
     if !options.relief && prior_used.is_none() {
@@ -506,44 +570,70 @@ fn refine(
         held.extend(relief.filter(|n| RELIEF_MAPS.contains(n)).map(String::from));
     }
     let tie = UniformChannels::new(brdf, &held)?;
-    let start_raw = tie.apply(&start_raw)?;
-    let raw = Var::from_tensor(&start_raw)?;
     let terms = CameraTerms::new(start_log_gain, start_vignetting)?;
-    let rho2 = camera::rho_squared(size)?;
-    let mut vars = vec![("raw".to_string(), raw.clone())];
-    vars.extend(terms.vars());
-    let mut adam = Adam::new(vars, AdamConfig::kingma(options.lr))?;
     let start = Instant::now();
     let mut losses = Vec::with_capacity(options.steps);
-    let predict = |raw: &Tensor| -> anyhow::Result<(MaterialMaps, Tensor)> {
-        let maps = brdf.decode(raw)?.with_texel_size(Some(texel));
-        let radiance = render_radiance_with(brdf.as_ref(), &maps, &geometry)?;
-        Ok((maps, encode_display(&terms.expose(&radiance, &rho2)?)?))
+    // A fit from constant maps spends its first steps on a smaller photo (a prior's maps
+    // start at full size, where E decoded them).
+    let factor = if prior_used.is_none() {
+        coarse_factor(input.size, options.coarse_min_size)
+    } else {
+        1
     };
-    for step in 0..options.steps {
-        let fitted = tie.apply(raw.as_tensor())?;
-        let (_, predicted) = predict(&fitted)?;
-        let data = (predicted - &photo)?.abs()?.mean_all()?;
-        let mut loss = data;
-        if options.smoothness > 0.0 {
-            loss = (loss + (total_variation(&fitted)? * options.smoothness)?)?;
-        }
-        if options.anchor > 0.0 && prior_used.is_some() {
-            let drift = (&fitted - &start_raw)?.abs()?.mean_all()?;
-            loss = (loss + (drift * options.anchor)?)?;
-        }
-        let value = loss.to_scalar::<f32>()? as f64;
-        if !value.is_finite() {
-            bail!(
-                "{name}: the fit diverged at step {} (loss {value})",
-                step + 1
-            );
-        }
-        adam.step(&loss.backward()?)?;
-        losses.push(value);
-        progress(offset + step + 1, value);
-    }
-    let (maps, render) = predict(&tie.apply(raw.as_tensor())?)?;
+    let coarse_steps = options.steps.saturating_sub(options.full_size_steps);
+    let (start_raw, coarse) = if factor > 1 && coarse_steps > 0 {
+        let small = input.box_filtered(factor)?;
+        let (_, c, _, _) = start_raw.dims4()?;
+        // The warm-up's start is uniform, so it is the same at any size.
+        let uniform = start_raw.narrow(2, 0, 1)?.narrow(3, 0, 1)?;
+        let raw = uniform.broadcast_as((1, c, small.size, small.size))?;
+        let stage = Stage {
+            input: &small,
+            brdf,
+            tie: &tie,
+            terms: &terms,
+            anchor: None,
+            lr: options.lr,
+            smoothness: options.smoothness,
+        };
+        let fitted = stage.descend(&raw, coarse_steps, name, &mut |step, loss| {
+            losses.push(loss);
+            progress(offset + step, loss);
+        })?;
+        let coarse = CoarseStage {
+            size: small.size,
+            steps: coarse_steps,
+            seconds: start.elapsed().as_secs_f64(),
+        };
+        (upsample_clamped(&fitted, factor)?, Some(coarse))
+    } else {
+        (start_raw, None)
+    };
+    let start_raw = tie.apply(&start_raw)?;
+    let done = losses.len();
+    let stage = Stage {
+        input: &input,
+        brdf,
+        tie: &tie,
+        terms: &terms,
+        anchor: prior_used
+            .is_some()
+            .then_some((&start_raw, options.anchor))
+            .filter(|(_, weight)| *weight > 0.0),
+        lr: options.lr,
+        smoothness: options.smoothness,
+    };
+    let fitted = stage.descend(&start_raw, options.steps - done, name, &mut |step, loss| {
+        losses.push(loss);
+        progress(offset + done + step, loss);
+    })?;
+    let (maps, render) = stage.predict(&fitted)?;
+    let Input {
+        photo,
+        highlight,
+        side,
+        ..
+    } = input;
     let gain = terms.log_gain()?.exp();
     Ok(Capture {
         brdf: brdf.clone(),
@@ -557,9 +647,102 @@ fn refine(
         fov_degrees: options.fov_degrees,
         losses,
         seconds: start.elapsed().as_secs_f64(),
+        coarse,
         prior: prior_used,
         selection: None,
     })
+}
+
+/// One size of a refinement: the photo at that size and what the loss holds fixed.
+struct Stage<'a> {
+    input: &'a Input,
+    brdf: &'a Brdf,
+    tie: &'a UniformChannels,
+    /// Shared by the stages: the gain and vignetting carry over from one size to the next.
+    terms: &'a CameraTerms,
+    /// The prior's raw maps and the weight μ of the term holding the fit near them.
+    anchor: Option<(&'a Tensor, f64)>,
+    lr: f64,
+    smoothness: f64,
+}
+
+impl Stage<'_> {
+    /// The maps decoded from `raw` (1, C, N, N) and their display render under the photo's
+    /// flash, exposed by the camera terms: (1, 3, N, N).
+    fn predict(&self, raw: &Tensor) -> anyhow::Result<(MaterialMaps, Tensor)> {
+        let input = self.input;
+        let maps = self.brdf.decode(raw)?.with_texel_size(Some(input.texel));
+        let radiance = render_radiance_with(self.brdf.as_ref(), &maps, &input.geometry)?;
+        let exposed = self.terms.expose(&radiance, &input.rho2)?;
+        Ok((maps, encode_display(&exposed)?))
+    }
+
+    /// `steps` Adam steps of the loss (module docs) on the raw maps from `start` (1, C, N, N)
+    /// and on the camera terms; `step(k, loss)` after every step (k from 1). Returns the
+    /// fitted raw maps, the held channels tied.
+    fn descend(
+        &self,
+        start: &Tensor,
+        steps: usize,
+        name: &str,
+        step: &mut dyn FnMut(usize, f64),
+    ) -> anyhow::Result<Tensor> {
+        let raw = Var::from_tensor(&start.contiguous()?)?;
+        let mut vars = vec![("raw".to_string(), raw.clone())];
+        vars.extend(self.terms.vars());
+        let mut adam = Adam::new(vars, AdamConfig::kingma(self.lr))?;
+        for k in 1..=steps {
+            let fitted = self.tie.apply(raw.as_tensor())?;
+            let (_, predicted) = self.predict(&fitted)?;
+            let mut loss = (predicted - &self.input.photo)?.abs()?.mean_all()?;
+            if self.smoothness > 0.0 {
+                loss = (loss + (total_variation(&fitted)? * self.smoothness)?)?;
+            }
+            if let Some((anchor, weight)) = self.anchor {
+                let drift = (&fitted - anchor)?.abs()?.mean_all()?;
+                loss = (loss + (drift * weight)?)?;
+            }
+            let value = loss.to_scalar::<f32>()? as f64;
+            if !value.is_finite() {
+                bail!("{name}: the fit diverged at step {k} (loss {value})");
+            }
+            adam.step(&loss.backward()?)?;
+            step(k, value);
+        }
+        Ok(self.tie.apply(raw.as_tensor())?)
+    }
+}
+
+/// `x` (B, C, N, N) upsampled `factor`× (a power of two) by repeated ×2 bilinear
+/// interpolation (`align_corners = False`), the border texels repeated beyond the edge (a
+/// photo's maps do not wrap around): (B, C, factor·N, factor·N).
+fn upsample_clamped(x: &Tensor, factor: usize) -> anyhow::Result<Tensor> {
+    let mut x = x.clone();
+    let mut f = factor;
+    while f > 1 {
+        let (_, _, h, w) = x.dims4()?;
+        x = separable(&x, &clamped_upsample_axis(h)?, &clamped_upsample_axis(w)?)?;
+        f /= 2;
+    }
+    Ok(x)
+}
+
+/// The ×2 bilinear interpolation matrix of an axis of length `n` (2n × n): output `2i`
+/// samples the input at `i − ¼`, output `2i + 1` at `i + ¼`, neighbours beyond the edge
+/// clamped to it.
+fn clamped_upsample_axis(n: usize) -> anyhow::Result<AxisMatrix> {
+    let rows: Vec<Vec<(usize, f64)>> = (0..2 * n)
+        .map(|o| {
+            let i = o / 2;
+            let far = if o % 2 == 1 {
+                (i + 1).min(n - 1)
+            } else {
+                i.saturating_sub(1)
+            };
+            vec![(i, 0.75), (far, 0.25)]
+        })
+        .collect();
+    Ok(AxisMatrix::from_rows(n, &rows)?)
 }
 
 /// Which raw channels [`CaptureOptions::uniform_maps`] holds uniform, as a (1, C, 1, 1)
@@ -626,22 +809,8 @@ fn fit_uniform(
     options: &CaptureOptions,
 ) -> anyhow::Result<(Tensor, f64, Option<f64>)> {
     let device = Device::Cpu;
-    let factor = (input.size / WARMUP_SIZE).max(1);
-    let n = input.size / factor;
-    // The central n·factor texels (the centre moves by half a texel at most, a 1/128 of the
-    // warm-up's image), box-filtered in linear light, as a smaller sensor would have seen them.
-    let start = (input.size - n * factor) / 2;
-    let photo = encode_display(
-        &input
-            .photo
-            .narrow(2, start, n * factor)?
-            .narrow(3, start, n * factor)?
-            .powf(DISPLAY_GAMMA)?
-            .avg_pool2d(factor)?,
-    )?;
-    let side = input.side * (n * factor) as f64 / input.size as f64;
-    let geometry = FlashGeometry::with_side(&[input.light], n, side, DType::F32, &device)?;
-    let rho2 = camera::rho_squared(n)?;
+    let small = input.box_filtered((input.size / WARMUP_SIZE).max(1))?;
+    let (n, side) = (small.size, small.side);
     let channels = brdf.channels();
     let mut best: Option<(f64, Tensor, f64, Option<f64>)> = None;
     for raw_start in warmup_starts(brdf) {
@@ -651,9 +820,9 @@ fn fit_uniform(
             let maps = brdf
                 .decode(&raw.as_tensor().broadcast_as((1, channels, n, n))?)?
                 .with_texel_size(Some(side / n as f64));
-            let radiance = render_radiance_with(brdf.as_ref(), &maps, &geometry)?;
-            let predicted = encode_display(&terms.expose(&radiance, &rho2)?)?;
-            Ok((predicted - &photo)?.abs()?.mean_all()?)
+            let radiance = render_radiance_with(brdf.as_ref(), &maps, &small.geometry)?;
+            let predicted = encode_display(&terms.expose(&radiance, &small.rho2)?)?;
+            Ok((predicted - &small.photo)?.abs()?.mean_all()?)
         };
         let mut vars = vec![("raw".to_string(), raw.clone())];
         vars.extend(terms.vars());
@@ -735,6 +904,9 @@ struct CaptureRecord<'a> {
     loss_last: Option<f64>,
     l1_encoded: f64,
     seconds: f64,
+    /// The refinement's coarse stage (size, steps, seconds), when it had one.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    coarse: Option<CoarseStage>,
     prior: Option<PriorRecord>,
     /// How the model was chosen (`--brdf auto`): every candidate's error, the tolerance.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -860,6 +1032,7 @@ pub fn write_capture(
         loss_last: capture.losses.last().copied(),
         l1_encoded: l1,
         seconds: capture.seconds,
+        coarse: capture.coarse,
         prior: prior_record,
         selection,
     };
@@ -868,4 +1041,50 @@ pub fn write_capture(
         &serde_json::to_vec_pretty(&record)?,
     )?;
     Ok(textures)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn coarse_factor_halves_even_sizes_down_to_the_minimum() {
+        for (size, factor) in [
+            (1024, 2),
+            (2048, 4),
+            (1536, 2),
+            (1000, 1),
+            (512, 1),
+            (1023, 1),
+        ] {
+            assert_eq!(coarse_factor(size, 512), factor, "{size}");
+        }
+        assert_eq!(coarse_factor(64, 16), 4);
+        assert_eq!(coarse_factor(64, 0), 64);
+    }
+
+    #[test]
+    fn clamped_upsampling_keeps_constants_and_interpolates_ramps() {
+        // 2 × 3 planes of a constant and of a ramp along x: ×2 keeps the constant exactly,
+        // samples the ramp at (o + ½)/2 − ½ inside and clamps it at the edges.
+        let device = Device::Cpu;
+        let (h, w) = (2usize, 3usize);
+        let mut values = vec![0.7f64; h * w];
+        values.extend((0..h * w).map(|i| (i % w) as f64));
+        let x = Tensor::from_vec(values, (1, 2, h, w), &device).unwrap();
+        let up = upsample_clamped(&x, 2).unwrap();
+        assert_eq!(up.dims4().unwrap(), (1, 2, 2 * h, 2 * w));
+        let planes: Vec<Vec<Vec<f64>>> = up.squeeze(0).unwrap().to_vec3().unwrap();
+        for row in &planes[0] {
+            for &v in row {
+                assert!((v - 0.7).abs() < 1e-15, "{v}");
+            }
+        }
+        let expected = [0.0, 0.25, 0.75, 1.25, 1.75, 2.0];
+        for row in &planes[1] {
+            for (v, e) in row.iter().zip(expected) {
+                assert!((v - e).abs() < 1e-15, "{row:?}");
+            }
+        }
+    }
 }

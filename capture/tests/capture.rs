@@ -323,3 +323,44 @@ fn the_warm_up_recovers_the_vignetting_of_a_uniform_material() {
     let fitted = result.vignetting.unwrap();
     assert!((fitted - 0.3).abs() < 0.05, "fitted vignetting {fitted}");
 }
+
+#[test]
+fn a_coarse_stage_fits_at_half_size_and_relights_as_well_as_the_full_size_fit() {
+    // 150 steps on the photo box-filtered to 32², then 50 at 64², against 200 at 64²: the
+    // split is recorded, the losses cover both stages, and the result fits the photo and
+    // predicts the material under new flashes about as well.
+    let (png, _) = photo();
+    let brdf = lookup("ggx").unwrap();
+    let fit = |full_size_steps: usize| {
+        let options = CaptureOptions {
+            size: SIZE,
+            steps: 200,
+            fov_degrees: TRAINING_FOV_DEGREES,
+            full_size_steps,
+            coarse_min_size: SIZE / 2,
+            ..CaptureOptions::default()
+        };
+        capture(&png, "rendered.png", &brdf, &options, &mut |_, _| {}).unwrap()
+    };
+    let (staged, whole) = (fit(50), fit(200));
+    let coarse = staged.coarse.unwrap();
+    assert_eq!((coarse.size, coarse.steps), (SIZE / 2, 150));
+    assert!(whole.coarse.is_none());
+    assert_eq!(staged.losses.len(), 200);
+    let (_, size, _) = staged.maps.batch_and_size().unwrap();
+    assert_eq!(size, SIZE);
+    let l1 = mean_abs_difference(&staged.render, &staged.photo);
+    assert!(l1 < 0.02, "re-render L1 {l1}");
+    let truth = render_truth(PHOTO_SIDE, &new_flash_positions(PHOTO_SIDE));
+    let held_out = |capture| {
+        mean_abs_difference(
+            &relight(capture, &new_flash_positions(PHOTO_SIDE)).unwrap(),
+            &truth,
+        )
+    };
+    let (staged_l1, whole_l1) = (held_out(&staged), held_out(&whole));
+    assert!(
+        staged_l1 < 1.25 * whole_l1,
+        "held-out L1 with a coarse stage {staged_l1}, without {whole_l1}"
+    );
+}

@@ -1,7 +1,7 @@
 //! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--size 256] [--steps 400] [--fov 67]
 //! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]
 //! [--tolerance T] [--warmup-steps 100] [--no-vignetting] [--uniform MAP,…] [--relief]
-//! [--gltf] [--mtlx]`:
+//! [--full-size-steps 100] [--gltf] [--mtlx]`:
 //! one phone flash photo → maps of a named BRDF model. The fit is the
 //! library's `photomat_capture::capture_with_prior` (docs/capture.md): from constant maps, or,
 //! with `--prior` or `--model`, from the model folder's generator prior when the folder has an
@@ -112,6 +112,13 @@ pub struct Args {
     #[arg(long)]
     pub no_vignetting: bool,
 
+    /// Of --steps, how many run at the full size in a capture of 1024² or more from constant
+    /// maps; the others run on the photo box-filtered to 512²…1023² (the size halved while
+    /// the half is 512 or more and the size even), a quarter of the texels per halving, and start the full-size
+    /// steps from their maps upsampled (capture.json records the split) [default: 100].
+    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(0..=100_000))]
+    pub full_size_steps: Option<u32>,
+
     /// Fit the relief (the height or normal map) texel by texel in a fit from constant maps.
     /// Off by default: it is held flat, which relit independent test photos better under new
     /// flashes than the relief one flash paints in (docs/capture.md, "Fit").
@@ -175,6 +182,9 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             .warmup_steps
             .map_or(defaults.warmup_steps, |k| k as usize),
         vignetting: defaults.vignetting && !args.no_vignetting,
+        full_size_steps: args
+            .full_size_steps
+            .map_or(defaults.full_size_steps, |k| k as usize),
         ..defaults
     };
     let prior_options = PriorOptions {
@@ -264,6 +274,17 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         result.losses.len(),
         result.seconds
     )?;
+    if let Some(coarse) = &result.coarse {
+        writeln!(
+            out,
+            "  of which {} steps at {}² in {:.1} s, the last {} at {}²",
+            coarse.steps,
+            coarse.size,
+            coarse.seconds,
+            result.losses.len() - coarse.steps,
+            options.size
+        )?;
+    }
     if let Some(prior) = &result.prior {
         let inversion = &prior.inversion;
         writeln!(
