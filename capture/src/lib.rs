@@ -171,8 +171,9 @@ pub struct CaptureOptions {
     pub full_size_steps: usize,
     /// Smallest side of the coarse stage: the side is halved while the half is at least this
     /// and the side is even. Default 512 (1024² → 512², 2048² → 512²): at 512² a step took
-    /// a quarter of a 1024² one's time on this project's 2-core machine, and the highlight's
-    /// lobe and the texture are still drawn (docs/benchmarks.md).
+    /// a fifth of a 1024² one's time on this project's 2-core machine, and the highlight's
+    /// lobe and the texture are still drawn (docs/benchmarks.md, "`photomat capture` at 1024²
+    /// with a coarse stage").
     pub coarse_min_size: usize,
 }
 
