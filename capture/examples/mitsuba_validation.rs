@@ -85,7 +85,14 @@ fn shown_normal(n: &Tensor) -> anyhow::Result<PlanarImage> {
     )?)
 }
 
+/// The `photomat` binary's allocator, so that the seconds reported are the command's.
+#[global_allocator]
+static GLOBAL: photomat_kernels::alloc::FastAllocator = photomat_kernels::alloc::FastAllocator;
+
 fn main() -> anyhow::Result<()> {
+    // SAFETY: nothing has started a thread yet: this is the first statement of `main`.
+    unsafe { photomat_kernels::threads::set_up_like_the_binary() };
+    photomat_kernels::alloc::keep_freed_pages();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let usage = "usage: mitsuba_validation CAPVAL MODEL [SHEET.png [FIRST COUNT]]";
     let set = PathBuf::from(args.first().context(usage)?);

@@ -36,7 +36,14 @@ use photomat_core::map_files::load_maps;
 
 const SIZE: usize = 256;
 
+/// The `photomat` binary's allocator, so that the seconds reported are the command's.
+#[global_allocator]
+static GLOBAL: photomat_kernels::alloc::FastAllocator = photomat_kernels::alloc::FastAllocator;
+
 fn main() -> anyhow::Result<()> {
+    // SAFETY: nothing has started a thread yet: this is the first statement of `main`.
+    unsafe { photomat_kernels::threads::set_up_like_the_binary() };
+    photomat_kernels::alloc::keep_freed_pages();
     let args: Vec<String> = std::env::args().skip(1).collect();
     let usage = "usage: prior_validation SIM MODEL [PER_FAMILY] [ANCHOR]";
     let sim = PathBuf::from(args.first().context(usage)?);

@@ -12,10 +12,7 @@ static GLOBAL: photomat_kernels::alloc::FastAllocator = photomat_kernels::alloc:
 
 fn main() -> std::process::ExitCode {
     // SAFETY: nothing has started a thread yet: this is the first statement of `main`.
-    unsafe {
-        photomat_kernels::threads::run_candle_elementwise_inline();
-        photomat_kernels::threads::fix_rayon_thread_count();
-    }
+    unsafe { photomat_kernels::threads::set_up_like_the_binary() };
     photomat_kernels::alloc::keep_freed_pages();
     photomat_cli::run()
 }

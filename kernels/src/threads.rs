@@ -52,3 +52,17 @@ pub unsafe fn fix_rayon_thread_count() -> Option<usize> {
     unsafe { std::env::set_var(RAYON_THREADS_VAR, count.to_string()) };
     Some(count)
 }
+
+/// The binary's thread set-up, for programs (examples, benchmarks) whose timings should be
+/// the `photomat` binary's: [`run_candle_elementwise_inline`], then
+/// [`fix_rayon_thread_count`].
+///
+/// # Safety
+/// As for [`run_candle_elementwise_inline`]: no other thread may exist yet.
+pub unsafe fn set_up_like_the_binary() {
+    // SAFETY: the caller guarantees that no other thread exists yet.
+    unsafe {
+        run_candle_elementwise_inline();
+        fix_rayon_thread_count();
+    }
+}
