@@ -73,7 +73,8 @@ use photomat_core::{Brdf, FlashGeometry, Highlight, MaterialMaps, encode_display
 use photomat_data::dataset::photo::{Framing, prepare_photo};
 use photomat_data::highlight::{DetectionStatus, DetectorKind};
 use photomat_estimator::sample::choice::{Candidate, Selection, choose};
-use photomat_kernels::fir::{AxisMatrix, separable};
+use photomat_estimator::upsample::clamped_upsample_axis;
+use photomat_kernels::fir::separable;
 use photomat_train::{Adam, AdamConfig};
 use serde::Serialize;
 
@@ -397,6 +398,20 @@ struct Input {
 }
 
 impl Input {
+    /// The maps of `brdf` decoded from `raw` (1, C, N, N) at this photo's texel size, and
+    /// their display render under its flash, exposed by `terms`: (1, 3, N, N).
+    fn predict(
+        &self,
+        brdf: &Brdf,
+        terms: &CameraTerms,
+        raw: &Tensor,
+    ) -> anyhow::Result<(MaterialMaps, Tensor)> {
+        let maps = brdf.decode(raw)?.with_texel_size(Some(self.texel));
+        let radiance = render_radiance_with(brdf.as_ref(), &maps, &self.geometry)?;
+        let exposed = terms.expose(&radiance, &self.rho2)?;
+        Ok((maps, encode_display(&exposed)?))
+    }
+
     /// The central `n·factor` texels of the photo (`n = size / factor`; the centre moves by
     /// half a texel at most) box-filtered by `factor` in linear light, as a sensor of n²
     /// pixels would have seen them, with the flash geometry of that smaller square.
@@ -668,14 +683,9 @@ struct Stage<'a> {
 }
 
 impl Stage<'_> {
-    /// The maps decoded from `raw` (1, C, N, N) and their display render under the photo's
-    /// flash, exposed by the camera terms: (1, 3, N, N).
+    /// [`Input::predict`] with this stage's model and camera terms.
     fn predict(&self, raw: &Tensor) -> anyhow::Result<(MaterialMaps, Tensor)> {
-        let input = self.input;
-        let maps = self.brdf.decode(raw)?.with_texel_size(Some(input.texel));
-        let radiance = render_radiance_with(self.brdf.as_ref(), &maps, &input.geometry)?;
-        let exposed = self.terms.expose(&radiance, &input.rho2)?;
-        Ok((maps, encode_display(&exposed)?))
+        self.input.predict(self.brdf, self.terms, raw)
     }
 
     /// `steps` Adam steps of the loss (module docs) on the raw maps from `start` (1, C, N, N)
@@ -726,24 +736,6 @@ fn upsample_clamped(x: &Tensor, factor: usize) -> anyhow::Result<Tensor> {
         f /= 2;
     }
     Ok(x)
-}
-
-/// The ×2 bilinear interpolation matrix of an axis of length `n` (2n × n): output `2i`
-/// samples the input at `i − ¼`, output `2i + 1` at `i + ¼`, neighbours beyond the edge
-/// clamped to it.
-fn clamped_upsample_axis(n: usize) -> anyhow::Result<AxisMatrix> {
-    let rows: Vec<Vec<(usize, f64)>> = (0..2 * n)
-        .map(|o| {
-            let i = o / 2;
-            let far = if o % 2 == 1 {
-                (i + 1).min(n - 1)
-            } else {
-                i.saturating_sub(1)
-            };
-            vec![(i, 0.75), (far, 0.25)]
-        })
-        .collect();
-    Ok(AxisMatrix::from_rows(n, &rows)?)
 }
 
 /// Which raw channels [`CaptureOptions::uniform_maps`] holds uniform, as a (1, C, 1, 1)
@@ -811,18 +803,15 @@ fn fit_uniform(
 ) -> anyhow::Result<(Tensor, f64, Option<f64>)> {
     let device = Device::Cpu;
     let small = input.box_filtered((input.size / WARMUP_SIZE).max(1))?;
-    let (n, side) = (small.size, small.side);
+    let n = small.size;
     let channels = brdf.channels();
     let mut best: Option<(f64, Tensor, f64, Option<f64>)> = None;
     for raw_start in warmup_starts(brdf) {
         let raw = Var::from_tensor(&Tensor::from_vec(raw_start, (1, channels, 1, 1), &device)?)?;
         let terms = CameraTerms::new(0.0, options.vignetting.then_some(camera::START_VIGNETTING))?;
         let loss = || -> anyhow::Result<Tensor> {
-            let maps = brdf
-                .decode(&raw.as_tensor().broadcast_as((1, channels, n, n))?)?
-                .with_texel_size(Some(side / n as f64));
-            let radiance = render_radiance_with(brdf.as_ref(), &maps, &small.geometry)?;
-            let predicted = encode_display(&terms.expose(&radiance, &small.rho2)?)?;
+            let uniform = raw.as_tensor().broadcast_as((1, channels, n, n))?;
+            let (_, predicted) = small.predict(brdf, &terms, &uniform)?;
             Ok((predicted - &small.photo)?.abs()?.mean_all()?)
         };
         let mut vars = vec![("raw".to_string(), raw.clone())];

@@ -48,14 +48,34 @@ const FAR: f64 = 0.25;
 /// # Shapes
 /// 2n × n; `n` ≥ 1.
 pub fn periodic_upsample_axis(n: usize) -> Result<AxisMatrix> {
+    upsample_axis(n, |i, odd| if odd { (i + 1) % n } else { (i + n - 1) % n })
+}
+
+/// [`periodic_upsample_axis`] for an axis that does not wrap around (a photo's): the
+/// neighbour beyond an edge is the edge texel itself, so the outermost outputs repeat it.
+///
+/// # Shapes
+/// 2n × n; `n` ≥ 1.
+pub fn clamped_upsample_axis(n: usize) -> Result<AxisMatrix> {
+    upsample_axis(n, |i, odd| {
+        if odd {
+            (i + 1).min(n - 1)
+        } else {
+            i.saturating_sub(1)
+        }
+    })
+}
+
+/// The ×2 bilinear matrix whose row `2i + odd` holds ¾ at column `i` and ¼ at the farther
+/// neighbour `far(i, odd)`.
+fn upsample_axis(n: usize, far: impl Fn(usize, bool) -> usize) -> Result<AxisMatrix> {
     if n == 0 {
         bail!("cannot upsample an axis of length 0");
     }
     let rows: Vec<Vec<(usize, f64)>> = (0..2 * n)
         .map(|o| {
             let (i, odd) = (o / 2, o % 2 == 1);
-            let far = if odd { (i + 1) % n } else { (i + n - 1) % n };
-            vec![(i, NEAR), (far, FAR)]
+            vec![(i, NEAR), (far(i, odd), FAR)]
         })
         .collect();
     AxisMatrix::from_rows(n, &rows)
