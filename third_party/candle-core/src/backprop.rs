@@ -173,6 +173,14 @@ impl Tensor {
             let grad = grads
                 .remove(node)
                 .expect("candle internal error - grad not populated");
+            // photomat patch: the rules below were written for the contiguous gradients that
+            // zero-filled accumulation produced; a first contribution stored as it is may be a
+            // strided view (a transpose, a broadcast), so it is copied here, as `add` did.
+            let grad = if grad.is_contiguous() {
+                grad
+            } else {
+                grad.contiguous()?
+            };
             // https://github.com/huggingface/candle/issues/1241
             // Ideally, we would make these operations in place where possible to ensure that we
             // do not have to allocate too often. Here we just call `.detach` to avoid computing
@@ -748,7 +756,16 @@ impl GradStore {
 
     fn or_insert(&mut self, tensor: &Tensor) -> Result<&mut Tensor> {
         let grad = match self.0.entry(tensor.id()) {
-            Entry::Occupied(entry) => entry.into_mut(),
+            Entry::Occupied(entry) => {
+                // photomat patch: a first contribution stored by `accumulate` may be a strided
+                // view, and the callers of `or_insert` pass it to ops (index_add, scatter_add,
+                // slice_scatter) that need a contiguous accumulator.
+                let grad = entry.into_mut();
+                if !grad.is_contiguous() {
+                    *grad = grad.contiguous()?;
+                }
+                grad
+            }
             Entry::Vacant(entry) => {
                 let grad = tensor.zeros_like()?;
                 entry.insert(grad)
