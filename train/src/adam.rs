@@ -16,6 +16,13 @@
 //! Variables without a gradient in the [`GradStore`] are left alone, moments included (as
 //! PyTorch does for parameters whose `.grad` is `None`); the step count is shared.
 //!
+//! On the CPU (f32, f64) each variable is updated by two in-place passes with no allocation,
+//! the moments from the gradient and then the variable from the moments, in the order of
+//! operations above (PyTorch's `fused` Adam does the same on CUDA). Composed from candle ops
+//! the same update is eleven passes that each allocate their result; that path remains for
+//! other devices and dtypes and runs inside [`photomat_kernels::with_reference_ops`]
+//! (`docs/benchmarks.md`, "Fused Adam"; bench `train/benches/adam.rs`).
+//!
 //! [`AdamConfig::lazy`] applies StyleGAN2's lazy-regularisation correction (Karras et al. 2020,
 //! Appendix B / `training_loop.py`): a network regularised every k steps uses
 //! `lr·c`, `β₁^c`, `β₂^c` with `c = k/(k+1)`.
@@ -41,11 +48,15 @@
 //! # Ok(()) }
 //! ```
 
+use std::ops::SubAssign;
 use std::path::Path;
 
 use candle_core::backprop::GradStore;
-use candle_core::{DType, Result, Tensor, Var, bail};
+use candle_core::{
+    CpuStorage, DType, InplaceOp2, InplaceOp3, Layout, Result, Tensor, Var, WithDType, bail,
+};
 use candle_nn::VarMap;
+use num_traits::Float;
 
 use crate::varmap::{lock, sorted_vars};
 
@@ -130,6 +141,182 @@ struct Slot {
     v: Var,
 }
 
+/// The constants of one Adam step `t` (module docs): `step_size = lr/(1 − β₁ᵗ)`,
+/// `inv_sqrt_bias2 = 1/√(1 − β₂ᵗ)`.
+#[derive(Debug, Clone, Copy)]
+struct Update {
+    beta1: f64,
+    beta2: f64,
+    step_size: f64,
+    inv_sqrt_bias2: f64,
+    eps: f64,
+}
+
+/// Whether a slot can take the fused in-place update: CPU, f32 or f64, every tensor
+/// contiguous (a `Var` always is; the gradient is made so by the caller), and not inside
+/// [`photomat_kernels::with_reference_ops`] (which times and checks the composed update).
+fn fused_path(slot: &Slot, g: &Tensor) -> bool {
+    let t = slot.var.as_tensor();
+    !photomat_kernels::reference_ops()
+        && t.device().is_cpu()
+        && matches!(t.dtype(), DType::F32 | DType::F64)
+        && [t, slot.m.as_tensor(), slot.v.as_tensor()]
+            .iter()
+            .all(|x| x.is_contiguous())
+        && g.shape() == t.shape()
+}
+
+impl Update {
+    /// The update from candle ops: eleven passes over the variable, each allocating its
+    /// result. The path for devices and dtypes the fused update does not handle.
+    fn apply_composed(&self, slot: &Slot, g: &Tensor) -> Result<()> {
+        let m = ((slot.m.as_tensor() * self.beta1)? + (g * (1.0 - self.beta1))?)?;
+        let v = ((slot.v.as_tensor() * self.beta2)? + (g.sqr()? * (1.0 - self.beta2))?)?;
+        let denom = v.sqrt()?.affine(self.inv_sqrt_bias2, self.eps)?;
+        let update = (m.div(&denom)? * self.step_size)?;
+        slot.var.set(&slot.var.as_tensor().sub(&update)?)?;
+        slot.m.set(&m)?;
+        slot.v.set(&v)?;
+        Ok(())
+    }
+
+    /// The same update as two in-place passes and no allocation: the moments from the
+    /// gradient, then the variable from the moments ([`MomentsOp`], [`ParameterOp`]).
+    fn apply_fused(&self, slot: &Slot, g: &Tensor) -> Result<()> {
+        slot.m.as_tensor().inplace_op2(
+            g,
+            &MomentsOp {
+                beta: self.beta1,
+                squared: false,
+            },
+        )?;
+        slot.v.as_tensor().inplace_op2(
+            g,
+            &MomentsOp {
+                beta: self.beta2,
+                squared: true,
+            },
+        )?;
+        slot.var.as_tensor().inplace_op3(
+            slot.m.as_tensor(),
+            slot.v.as_tensor(),
+            &ParameterOp(*self),
+        )
+    }
+}
+
+/// The contiguous elements of a CPU tensor's storage (the fused path's tensors all are).
+fn elements<'a, T: WithDType>(data: &'a [T], layout: &Layout) -> Result<&'a [T]> {
+    match layout.contiguous_offsets() {
+        Some((start, end)) => Ok(&data[start..end]),
+        None => bail!("Adam: fused update on a non-contiguous tensor"),
+    }
+}
+
+/// Mutable [`elements`].
+fn elements_mut<'a, T: WithDType>(data: &'a mut [T], layout: &Layout) -> Result<&'a mut [T]> {
+    match layout.contiguous_offsets() {
+        Some((start, end)) => Ok(&mut data[start..end]),
+        None => bail!("Adam: fused update on a non-contiguous tensor"),
+    }
+}
+
+/// A moment in place: `m ← β·m + (1 − β)·g`, or `v ← β·v + (1 − β)·g²` when `squared`.
+struct MomentsOp {
+    beta: f64,
+    squared: bool,
+}
+
+impl MomentsOp {
+    fn run<T: WithDType + Float>(&self, moment: &mut [T], g: &[T]) {
+        let (beta, rest) = (T::from_f64(self.beta), T::from_f64(1.0 - self.beta));
+        if self.squared {
+            for (m, &g) in moment.iter_mut().zip(g) {
+                *m = *m * beta + g * g * rest;
+            }
+        } else {
+            for (m, &g) in moment.iter_mut().zip(g) {
+                *m = *m * beta + g * rest;
+            }
+        }
+    }
+}
+
+impl InplaceOp2 for MomentsOp {
+    fn name(&self) -> &'static str {
+        "adam-moment"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &mut CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+    ) -> Result<()> {
+        match (s1, s2) {
+            (CpuStorage::F32(m), CpuStorage::F32(g)) => {
+                self.run(elements_mut(m, l1)?, elements(g, l2)?)
+            }
+            (CpuStorage::F64(m), CpuStorage::F64(g)) => {
+                self.run(elements_mut(m, l1)?, elements(g, l2)?)
+            }
+            _ => bail!("Adam: fused moments need f32 or f64 tensors of one dtype"),
+        }
+        Ok(())
+    }
+}
+
+/// The variable in place from its updated moments:
+/// `θ ← θ − step_size · m / (√v · inv_sqrt_bias2 + ε)`.
+struct ParameterOp(Update);
+
+impl ParameterOp {
+    fn run<T: WithDType + Float + SubAssign>(&self, theta: &mut [T], m: &[T], v: &[T]) {
+        let Update {
+            step_size,
+            inv_sqrt_bias2,
+            eps,
+            ..
+        } = self.0;
+        let (step, scale, eps) = (
+            T::from_f64(step_size),
+            T::from_f64(inv_sqrt_bias2),
+            T::from_f64(eps),
+        );
+        for ((p, &m), &v) in theta.iter_mut().zip(m).zip(v) {
+            *p -= m / (v.sqrt() * scale + eps) * step;
+        }
+    }
+}
+
+impl InplaceOp3 for ParameterOp {
+    fn name(&self) -> &'static str {
+        "adam-parameter"
+    }
+
+    fn cpu_fwd(
+        &self,
+        s1: &mut CpuStorage,
+        l1: &Layout,
+        s2: &CpuStorage,
+        l2: &Layout,
+        s3: &CpuStorage,
+        l3: &Layout,
+    ) -> Result<()> {
+        match (s1, s2, s3) {
+            (CpuStorage::F32(p), CpuStorage::F32(m), CpuStorage::F32(v)) => {
+                self.run(elements_mut(p, l1)?, elements(m, l2)?, elements(v, l3)?)
+            }
+            (CpuStorage::F64(p), CpuStorage::F64(m), CpuStorage::F64(v)) => {
+                self.run(elements_mut(p, l1)?, elements(m, l2)?, elements(v, l3)?)
+            }
+            _ => bail!("Adam: fused update needs f32 or f64 tensors of one dtype"),
+        }
+        Ok(())
+    }
+}
+
 /// Adam over named variables; see the module documentation for the update and the state.
 pub struct Adam {
     config: AdamConfig,
@@ -195,20 +382,23 @@ impl Adam {
             eps,
         } = self.config;
         let bias1 = 1.0 - beta1.powi(t as i32);
-        let sqrt_bias2 = (1.0 - beta2.powi(t as i32)).sqrt();
-        let step_size = lr / bias1;
+        let update = Update {
+            beta1,
+            beta2,
+            step_size: lr / bias1,
+            inv_sqrt_bias2: 1.0 / (1.0 - beta2.powi(t as i32)).sqrt(),
+            eps,
+        };
         for slot in &self.slots {
             let Some(g) = grads.get(slot.var.as_tensor()) else {
                 continue;
             };
             let g = g.to_dtype(slot.var.dtype())?;
-            let m = ((slot.m.as_tensor() * beta1)? + (&g * (1.0 - beta1))?)?;
-            let v = ((slot.v.as_tensor() * beta2)? + (g.sqr()? * (1.0 - beta2))?)?;
-            let denom = v.sqrt()?.affine(1.0 / sqrt_bias2, eps)?;
-            let update = (m.div(&denom)? * step_size)?;
-            slot.var.set(&slot.var.as_tensor().sub(&update)?)?;
-            slot.m.set(&m)?;
-            slot.v.set(&v)?;
+            if fused_path(slot, &g) {
+                update.apply_fused(slot, &g.contiguous()?)?;
+            } else {
+                update.apply_composed(slot, &g)?;
+            }
         }
         self.step
             .set(&Tensor::new(&[t as f64], self.step.device())?)?;
@@ -321,6 +511,59 @@ mod tests {
             scalar(&theta)
         );
         assert_eq!(opt.step_count(), 2);
+    }
+
+    /// The fused in-place update equals the composed candle-op update over several steps on
+    /// f32 tensors with mixed-sign, mixed-magnitude gradients (same operation order, so equal to
+    /// within an ulp or two of the values).
+    #[test]
+    fn fused_update_equals_the_composed_one() -> Result<()> {
+        let dev = Device::Cpu;
+        let init: Vec<f32> = (0..257)
+            .map(|i| ((i * 37 % 101) as f32 - 50.0) / 7.0)
+            .collect();
+        let slot = |data: &[f32]| -> Result<Slot> {
+            let var = Var::from_vec(data.to_vec(), (257,), &dev)?;
+            Ok(Slot {
+                m: Var::zeros(var.shape(), DType::F32, &dev)?,
+                v: Var::zeros(var.shape(), DType::F32, &dev)?,
+                var,
+            })
+        };
+        let (fused, composed) = (slot(&init)?, slot(&init)?);
+        for t in 1..=4i32 {
+            let g: Vec<f32> = (0..257)
+                .map(|i| (((i * 13 + t * 7) % 29) as f32 - 14.0) * 10f32.powi(i % 7 - 3))
+                .collect();
+            let g = Tensor::from_vec(g, (257,), &dev)?;
+            let update = Update {
+                beta1: 0.9,
+                beta2: 0.99,
+                step_size: 0.01 / (1.0 - 0.9f64.powi(t)),
+                inv_sqrt_bias2: 1.0 / (1.0 - 0.99f64.powi(t)).sqrt(),
+                eps: 1e-8,
+            };
+            assert!(fused_path(&fused, &g));
+            update.apply_fused(&fused, &g)?;
+            update.apply_composed(&composed, &g)?;
+        }
+        for (a, b) in [
+            (&fused.var, &composed.var),
+            (&fused.m, &composed.m),
+            (&fused.v, &composed.v),
+        ] {
+            let (a, b) = (
+                a.as_tensor().to_vec1::<f32>()?,
+                b.as_tensor().to_vec1::<f32>()?,
+            );
+            for (x, y) in a.iter().zip(&b) {
+                assert!(
+                    (x - y).abs() <= 2.0 * f32::EPSILON * y.abs().max(1e-30),
+                    "{x} vs {y}"
+                );
+            }
+        }
+        Ok(())
     }
 
     #[test]
