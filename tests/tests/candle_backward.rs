@@ -26,7 +26,10 @@ fn a_transposed_first_contribution_is_the_right_gradient() -> Result<()> {
     let x = Var::new(&[[1f32, 2., 3.], [4., 5., 6.]], &dev)?;
     let c = Tensor::new(&[[1f32, 10.], [100., 1000.], [-1., -10.]], &dev)?;
     let grads = (x.t()? * &c)?.sum_all()?.backward()?;
-    assert_close(grads.get(&x).expect("x has a gradient"), &[1., 100., -1., 10., 1000., -10.])
+    assert_close(
+        grads.get(&x).expect("x has a gradient"),
+        &[1., 100., -1., 10., 1000., -10.],
+    )
 }
 
 /// Reversing the rows with index_select, then transposing (candle's `test_flip_backprop`
@@ -40,7 +43,10 @@ fn index_select_under_a_transpose_gets_a_contiguous_gradient() -> Result<()> {
     let w = Tensor::new(&[[1f32, 2., 3.], [4., 5., 6.]], &dev)?;
     let flipped = x.index_select(&idx, 0)?;
     let grads = (flipped.t()? * &w)?.sum_all()?.backward()?;
-    assert_close(grads.get(&x).expect("x has a gradient"), &[3., 6., 2., 5., 1., 4.])
+    assert_close(
+        grads.get(&x).expect("x has a gradient"),
+        &[3., 6., 2., 5., 1., 4.],
+    )
 }
 
 /// A variable used three times, first through a broadcast: the stored broadcast view must take
