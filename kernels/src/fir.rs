@@ -251,19 +251,90 @@ fn height_pass<T: candle_core::WithDType>(m: &AxisMatrix, x: &[T], w: usize, out
     }
 }
 
+/// Widest band [`width_pass`] runs as dense dot products: StyleGAN2's `[1, 3, 3, 1]`
+/// filter spans at most 4 input columns per output (blur, ×2 down) and its transposes 2–4.
+const MAX_BAND: usize = 8;
+
+/// The rows of a matrix as bands of `width` consecutive input columns: row `j` is the dot
+/// product of `weights[j·width..(j + 1)·width]` with `x[first[j]..first[j] + width]`, zero
+/// weights where the row has no tap. A row whose taps do not fit in `width` consecutive
+/// columns (a tap wrapped onto the opposite edge of a circular axis) has `first[j] =`
+/// [`Band::SPARSE`] and keeps the compressed-row path.
+struct Band<T> {
+    width: usize,
+    first: Vec<usize>,
+    weights: Vec<T>,
+}
+
+impl<T: candle_core::WithDType> Band<T> {
+    const SPARSE: usize = usize::MAX;
+
+    /// The band form of `m`, or `None` when no row is narrow enough to gain from it.
+    fn new(m: &AxisMatrix) -> Option<Self> {
+        let span = |j: usize| {
+            let cols = &m.cols[m.starts[j]..m.starts[j + 1]];
+            // Columns are increasing (`from_rows`): the span is last − first + 1.
+            cols.first().map_or(0, |&c0| cols[cols.len() - 1] - c0 + 1)
+        };
+        let width = (0..m.n_out())
+            .map(span)
+            .filter(|&s| s <= MAX_BAND)
+            .max()?
+            .clamp(1, m.n_in());
+        let mut first = vec![Self::SPARSE; m.n_out()];
+        let mut weights = vec![T::from_f64(0.0); m.n_out() * width];
+        for (j, f) in first.iter_mut().enumerate() {
+            if span(j) > width {
+                continue;
+            }
+            let cols = &m.cols[m.starts[j]..m.starts[j + 1]];
+            // An empty row is a band of zeros; a band that would run past the last column
+            // starts earlier, its weights shifted right by as much.
+            let start = cols.first().copied().unwrap_or(0).min(m.n_in() - width);
+            for (&c, &w) in cols.iter().zip(&m.weights[m.starts[j]..m.starts[j + 1]]) {
+                weights[j * width + c - start] = T::from_f64(w);
+            }
+            *f = start;
+        }
+        Some(Self {
+            width,
+            first,
+            weights,
+        })
+    }
+}
+
 /// Writes every element of `out` (rows of `n_out`): element `j` of a row is
-/// `Σ_t weight_t · x[cols_t]` of the input row (`n_in`).
+/// `Σ_t weight_t · x[cols_t]` of the input row (`n_in`). Rows of the matrix that are bands
+/// ([`Band`]) run as fixed-width dot products over contiguous input, which the compiler
+/// unrolls; the others gather through the column list.
 fn width_pass<T: candle_core::WithDType>(m: &AxisMatrix, x: &[T], out: &mut [T]) {
     let weights = m.weights_as::<T>();
+    let band = Band::<T>::new(m);
     let (n_in, n_out) = (m.n_in(), m.n_out());
-    let row = |(o, x): (&mut [T], &[T])| {
-        for (j, d) in o.iter_mut().enumerate() {
-            let span = m.starts[j]..m.starts[j + 1];
-            let mut acc = T::from_f64(0.0);
-            for (&c, &wt) in m.cols[span.clone()].iter().zip(&weights[span]) {
-                acc += wt * x[c];
+    let sparse = |j: usize, x: &[T]| {
+        let span = m.starts[j]..m.starts[j + 1];
+        let mut acc = T::from_f64(0.0);
+        for (&c, &wt) in m.cols[span.clone()].iter().zip(&weights[span]) {
+            acc += wt * x[c];
+        }
+        acc
+    };
+    let row = |(o, x): (&mut [T], &[T])| match &band {
+        Some(b) => match b.width {
+            1 => banded_row::<T, 1>(b, &sparse, x, o),
+            2 => banded_row::<T, 2>(b, &sparse, x, o),
+            3 => banded_row::<T, 3>(b, &sparse, x, o),
+            4 => banded_row::<T, 4>(b, &sparse, x, o),
+            5 => banded_row::<T, 5>(b, &sparse, x, o),
+            6 => banded_row::<T, 6>(b, &sparse, x, o),
+            7 => banded_row::<T, 7>(b, &sparse, x, o),
+            _ => banded_row::<T, MAX_BAND>(b, &sparse, x, o),
+        },
+        None => {
+            for (j, d) in o.iter_mut().enumerate() {
+                *d = sparse(j, x);
             }
-            *d = acc;
         }
     };
     if out.len() < PARALLEL_ELEMENTS {
@@ -274,6 +345,29 @@ fn width_pass<T: candle_core::WithDType>(m: &AxisMatrix, x: &[T], out: &mut [T])
         out.par_chunks_mut(n_out * rows_per_task)
             .zip(x.par_chunks(n_in * rows_per_task))
             .for_each(|(o, x)| o.chunks_mut(n_out).zip(x.chunks(n_in)).for_each(row));
+    }
+}
+
+/// One row of [`width_pass`] through a band of width `W` (`band.width == W`).
+fn banded_row<T: candle_core::WithDType, const W: usize>(
+    band: &Band<T>,
+    sparse: &impl Fn(usize, &[T]) -> T,
+    x: &[T],
+    out: &mut [T],
+) {
+    debug_assert_eq!(band.width, W);
+    for ((j, d), w) in out.iter_mut().enumerate().zip(band.weights.chunks_exact(W)) {
+        let f = band.first[j];
+        if f == Band::<T>::SPARSE {
+            *d = sparse(j, x);
+            continue;
+        }
+        let xs: &[T; W] = x[f..f + W].try_into().expect("a band of W columns");
+        let mut acc = T::from_f64(0.0);
+        for t in 0..W {
+            acc += w[t] * xs[t];
+        }
+        *d = acc;
     }
 }
 
@@ -375,6 +469,10 @@ mod tests {
         (1, 4, 5, 5, 10, 10, 2, true),
         // Large enough for the rayon split (≥ 65,536 outputs per pass).
         (2, 16, 32, 32, 64, 64, 2, true),
+        // Rows wider than `MAX_BAND` (the width pass's compressed-row path only), and
+        // bands cut short at the last column (shifted left in `Band`).
+        (1, 2, 12, 12, 12, 12, 10, false),
+        (1, 3, 6, 6, 6, 6, 5, false),
     ];
 
     fn value_and_grad(
