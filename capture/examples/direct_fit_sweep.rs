@@ -6,7 +6,8 @@
 //! ```text
 //! cargo run --release -p photomat-capture --example direct_fit_sweep -- SET WARMUP[:FLAGS][,…] [FIRST COUNT [SIZE]]
 //! ```
-//! WARMUP is [`CaptureOptions::warmup_steps`]; FLAGS: `v` fits the vignetting, `u` holds
+//! WARMUP is [`CaptureOptions::warmup_steps`]; FLAGS: `v` fits the vignetting, `a` the
+//! ambient light, `u` holds
 //! specular and roughness uniform, `h` the height (flat normals), `f` runs every step at the
 //! full size (no coarse stage, [`CaptureOptions::full_size_steps`]). SIZE: the capture size
 //! of simulator folders (default 256).
@@ -124,6 +125,7 @@ fn main() -> anyhow::Result<()> {
                 highlight: Some((row * scale_px, col * scale_px)),
                 warmup_steps: *warmup,
                 vignetting: flags.contains('v'),
+                ambient: flags.contains('a'),
                 uniform_maps: if flags.contains('u') {
                     vec!["specular".into(), "roughness".into()]
                 } else {

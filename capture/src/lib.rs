@@ -11,11 +11,15 @@
 //! Deschaintre et al. 2018 and MaterialGAN, Guo et al. 2020). The geometry is the training
 //! data's: the photo is a square of side 2 world units seen from straight above, with the
 //! flash at height 1 above the highlight (docs/conventions.md). The photo's unknown exposure
-//! is a fitted global gain, its lens's falloff a fitted vignetting `V` ([`camera`]).
+//! is a fitted global gain, its lens's falloff a fitted vignetting `V`, the room's light a
+//! fitted ambient term ([`camera`]).
 //!
-//! The fit minimises, over the raw (pre-decoding) maps `θ`, the log gain `g` and `V`,
+//! The fit minimises, over the raw (pre-decoding) maps `θ`, the log gain `g`, `V` and the
+//! ambient radiance `c`,
 //!
-//! `L = mean |encode(e^g · V · render(decode(θ))) − photo| + λ · mean |∇θ|`
+//! `L = mean |encode(e^g · V · (render(decode(θ)) + c · A(θ))) − photo| + λ · mean |∇θ|`
+//!
+//! (`A`: the maps' reflectance of a uniform sky, [`camera`])
 //!
 //! in the display-encoded domain (what the photo stores; the gamma compresses the highlight
 //! as the eye does), with a total-variation prior of weight λ on the raw maps, which keeps
@@ -54,7 +58,7 @@
 //! ([`coarse_factor`]), whose maps, upsampled, start the last
 //! [`CaptureOptions::full_size_steps`] at full size (docs/capture.md, "Fit").
 //!
-//! Not yet: camera tilt, and a fitted ambient term.
+//! Not yet: camera tilt.
 
 pub mod camera;
 pub mod evaluate;
@@ -153,6 +157,13 @@ pub struct CaptureOptions {
     /// cannot, so only a warm-up identifies it (docs/benchmarks.md, "The direct capture's
     /// uniform warm-up").
     pub vignetting: bool,
+    /// Fit a dim, uniform ambient light ([`camera`]) in the warm-up and the refinement after
+    /// it, as [`Self::vignetting`]; otherwise the photo is taken in a dark room. No effect on
+    /// a model without diffuse or specular maps. Default off: with the vignetting it is not
+    /// identifiable on a uniform material (both change the falloff's quadratic term), and on
+    /// 8 simulated photos it relit 0.0750 → 0.0708 under held-out flashes, better on car
+    /// paint, worse on stone (docs/benchmarks.md, "A fitted ambient term").
+    pub ambient: bool,
     /// Maps of the model fitted as one value over the whole square (e.g. `specular`,
     /// `roughness` of a material that varies in colour and relief only), so that they cannot
     /// paint the highlight in. Names the model lacks are an error.
@@ -204,6 +215,7 @@ impl Default for CaptureOptions {
             anchor: 0.05,
             warmup_steps: 100,
             vignetting: true,
+            ambient: false,
             uniform_maps: Vec::new(),
             relief: false,
             full_size_steps: 100,
@@ -229,6 +241,8 @@ pub struct Capture {
     pub gain: f64,
     /// The fitted vignetting strength ([`camera`]), when it was fitted.
     pub vignetting: Option<f64>,
+    /// The fitted ambient radiance ([`camera`]), in the flash's units, when it was fitted.
+    pub ambient: Option<f64>,
     /// Side of the photographed square in world units, at flash height 1 ([`square_side`]).
     pub side: f64,
     /// The field of view it was computed from, in degrees.
@@ -408,7 +422,8 @@ impl Input {
     ) -> anyhow::Result<(MaterialMaps, Tensor)> {
         let maps = brdf.decode(raw)?.with_texel_size(Some(self.texel));
         let radiance = render_radiance_with(brdf.as_ref(), &maps, &self.geometry)?;
-        let exposed = terms.expose(&radiance, &self.rho2)?;
+        let reflectance = maps.ambient_reflectance()?;
+        let exposed = terms.expose(&radiance, reflectance.as_ref(), &self.rho2)?;
         Ok((maps, encode_display(&exposed)?))
     }
 
@@ -571,13 +586,13 @@ fn refine(
         log_gain: start_log_gain,
         prior: prior_used,
     } = start;
-    let (start_raw, start_log_gain, start_vignetting) =
+    let (start_raw, start_log_gain, start_vignetting, start_ambient) =
         if prior_used.is_none() && options.warmup_steps > 0 {
-            let (uniform, log_gain, vignetting) = fit_uniform(&input, brdf, options)?;
-            let raw = uniform.broadcast_as(start_raw.shape())?.contiguous()?;
-            (raw, log_gain, vignetting)
+            let warm = fit_uniform(&input, brdf, options)?;
+            let raw = warm.raw.broadcast_as(start_raw.shape())?.contiguous()?;
+            (raw, warm.log_gain, warm.vignetting, warm.ambient)
         } else {
-            (start_raw, start_log_gain, None)
+            (start_raw, start_log_gain, None, None)
         };
     let offset = prior_used.as_ref().map_or(0, |p| p.inversion.losses.len());
     let mut held = options.uniform_maps.clone();
@@ -586,7 +601,7 @@ fn refine(
         held.extend(relief.filter(|n| RELIEF_MAPS.contains(n)).map(String::from));
     }
     let tie = UniformChannels::new(brdf, &held)?;
-    let terms = CameraTerms::new(start_log_gain, start_vignetting)?;
+    let terms = CameraTerms::new(start_log_gain, start_vignetting, start_ambient)?;
     let start = Instant::now();
     let mut losses = Vec::with_capacity(options.steps);
     // A fit from constant maps spends its first steps on a smaller photo (a prior's maps
@@ -659,6 +674,7 @@ fn refine(
         highlight,
         gain,
         vignetting: terms.vignetting()?,
+        ambient: terms.ambient()?,
         side,
         fov_degrees: options.fov_degrees,
         losses,
@@ -790,25 +806,34 @@ impl UniformChannels {
 /// costs a sixteenth of a 256² one.
 pub const WARMUP_SIZE: usize = 64;
 
+/// What the uniform warm-up found: raw values (1, C, 1, 1), log gain, and the vignetting
+/// strength and ambient radiance when they are fitted.
+struct UniformFit {
+    raw: Tensor,
+    log_gain: f64,
+    vignetting: Option<f64>,
+    ambient: Option<f64>,
+}
+
 /// The uniform warm-up: one raw value per channel of `brdf` (constant maps) and the log
-/// gain (and the vignetting, when it is fitted), fitted by the refinement's data term to the
-/// photo box-filtered to [`WARMUP_SIZE`]² (or its own size when smaller) under the photo's
-/// flash, from each of [`warmup_starts`] with gain 1 and [`camera::START_VIGNETTING`]; the
-/// start that ends with the lowest loss wins. Returns its raw values (1, C, 1, 1), log gain
-/// and vignetting strength.
-fn fit_uniform(
-    input: &Input,
-    brdf: &Brdf,
-    options: &CaptureOptions,
-) -> anyhow::Result<(Tensor, f64, Option<f64>)> {
+/// gain (and the vignetting and ambient light, when they are fitted), fitted by the
+/// refinement's data term to the photo box-filtered to [`WARMUP_SIZE`]² (or its own size when
+/// smaller) under the photo's flash, from each of [`warmup_starts`] with gain 1,
+/// [`camera::START_VIGNETTING`] and [`camera::START_AMBIENT`]; the start that ends with the
+/// lowest loss wins.
+fn fit_uniform(input: &Input, brdf: &Brdf, options: &CaptureOptions) -> anyhow::Result<UniformFit> {
     let device = Device::Cpu;
     let small = input.box_filtered((input.size / WARMUP_SIZE).max(1))?;
     let n = small.size;
     let channels = brdf.channels();
-    let mut best: Option<(f64, Tensor, f64, Option<f64>)> = None;
+    let mut best: Option<(f64, UniformFit)> = None;
     for raw_start in warmup_starts(brdf) {
         let raw = Var::from_tensor(&Tensor::from_vec(raw_start, (1, channels, 1, 1), &device)?)?;
-        let terms = CameraTerms::new(0.0, options.vignetting.then_some(camera::START_VIGNETTING))?;
+        let terms = CameraTerms::new(
+            0.0,
+            options.vignetting.then_some(camera::START_VIGNETTING),
+            options.ambient.then_some(camera::START_AMBIENT),
+        )?;
         let loss = || -> anyhow::Result<Tensor> {
             let uniform = raw.as_tensor().broadcast_as((1, channels, n, n))?;
             let (_, predicted) = small.predict(brdf, &terms, &uniform)?;
@@ -822,14 +847,18 @@ fn fit_uniform(
         }
         let last = loss()?.to_scalar::<f32>()? as f64;
         // A start that diverged (NaN) never wins; the first finite one always can.
-        if last.is_finite() && best.as_ref().is_none_or(|(b, ..)| last < *b) {
-            let fitted = raw.as_tensor().detach();
-            best = Some((last, fitted, terms.log_gain()?, terms.vignetting()?));
+        if last.is_finite() && best.as_ref().is_none_or(|(b, _)| last < *b) {
+            let fit = UniformFit {
+                raw: raw.as_tensor().detach(),
+                log_gain: terms.log_gain()?,
+                vignetting: terms.vignetting()?,
+                ambient: terms.ambient()?,
+            };
+            best = Some((last, fit));
         }
     }
-    let (_, raw, log_gain, vignetting) =
-        best.context("the uniform warm-up diverged from every start")?;
-    Ok((raw, log_gain, vignetting))
+    let (_, fit) = best.context("the uniform warm-up diverged from every start")?;
+    Ok(fit)
 }
 
 /// Where the uniform warm-up starts: the middle of every map's range (raw 0: diffuse and
@@ -889,6 +918,9 @@ struct CaptureRecord<'a> {
     /// The fitted vignetting strength, when it was fitted.
     #[serde(skip_serializing_if = "Option::is_none")]
     vignetting: Option<f64>,
+    /// The fitted ambient radiance, in the flash's units, when it was fitted.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ambient: Option<f64>,
     steps: usize,
     loss_first: Option<f64>,
     loss_last: Option<f64>,
@@ -1017,6 +1049,7 @@ pub fn write_capture(
         highlight: &capture.highlight,
         gain: capture.gain,
         vignetting: capture.vignetting,
+        ambient: capture.ambient,
         steps: capture.losses.len(),
         loss_first: capture.losses.first().copied(),
         loss_last: capture.losses.last().copied(),

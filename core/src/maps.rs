@@ -87,6 +87,27 @@ impl MaterialMaps {
         self.maps.iter().map(|(k, v)| (k.as_str(), v))
     }
 
+    /// Reflectance under a dim, uniform white sky: (B, 3, H, W), the sum of the `diffuse` map
+    /// and of every 3-channel map whose name starts with `specular`, or `None` when the set
+    /// has neither. A Lambert lobe reflects exactly its albedo `ρ_d` of a uniform sky; a GGX
+    /// lobe reflects about its F0 (the Fresnel rise at grazing angles and the
+    /// multiple-scattering loss neglected), which is what the names mean in the built-in
+    /// models (`docs/conventions.md`, "Parameter maps"). The flash-photo simulator lights its
+    /// photos' ambient term with it and `photomat capture` fits that term.
+    pub fn ambient_reflectance(&self) -> Result<Option<Tensor>> {
+        let mut total: Option<Tensor> = None;
+        for (name, map) in self.iter() {
+            let reflects = name == "diffuse" || name.starts_with("specular");
+            if reflects && map.dim(1)? == 3 {
+                total = Some(match total {
+                    None => map.clone(),
+                    Some(t) => (t + map)?,
+                });
+            }
+        }
+        Ok(total)
+    }
+
     /// Apply `f` to every map (dtype or device conversion, detaching, narrowing a batch).
     pub fn map_tensors(&self, mut f: impl FnMut(&Tensor) -> Result<Tensor>) -> Result<Self> {
         let mut out = Self::new().with_texel_size(self.texel_size);

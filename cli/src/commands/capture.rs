@@ -1,6 +1,6 @@
 //! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--size 256] [--steps 400] [--fov 67]
 //! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]
-//! [--tolerance T] [--warmup-steps 100] [--no-vignetting] [--uniform MAP,…] [--relief]
+//! [--tolerance T] [--warmup-steps 100] [--no-vignetting] [--ambient] [--uniform MAP,…] [--relief]
 //! [--full-size-steps 100] [--gltf] [--mtlx]`:
 //! one phone flash photo → maps of a named BRDF model. The fit is the
 //! library's `photomat_capture::capture_with_prior` (docs/capture.md): from constant maps, or,
@@ -101,8 +101,9 @@ pub struct Args {
     pub uniform: Vec<String>,
 
     /// Steps of the uniform warm-up of a fit from constant maps: one value per map channel,
-    /// the exposure and the vignetting, fitted to the photo at 64² before the per-texel fit
-    /// starts from them (0: none, and no vignetting) [default: 100].
+    /// the exposure, the vignetting and the ambient light, fitted to the photo at 64² before
+    /// the per-texel fit starts from them (0: none, and no vignetting or ambient light)
+    /// [default: 100].
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(0..=100_000))]
     pub warmup_steps: Option<u32>,
 
@@ -111,6 +112,12 @@ pub struct Args {
     /// strength.
     #[arg(long)]
     pub no_vignetting: bool,
+
+    /// Fit a dim, uniform ambient light (reflected by the diffuse and specular maps) in the
+    /// warm-up and the fit, instead of taking the photo as taken in a dark room; capture.json
+    /// records the fitted radiance, in units of the flash's at the photo's centre.
+    #[arg(long)]
+    pub ambient: bool,
 
     /// Of --steps, how many run at the full size in a capture of 1024² or more from constant
     /// maps; the others run on the photo box-filtered to 512²…1023² (the size halved while
@@ -182,6 +189,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             .warmup_steps
             .map_or(defaults.warmup_steps, |k| k as usize),
         vignetting: defaults.vignetting && !args.no_vignetting,
+        ambient: defaults.ambient || args.ambient,
         full_size_steps: args
             .full_size_steps
             .map_or(defaults.full_size_steps, |k| k as usize),
@@ -268,7 +276,10 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         result.gain,
         result
             .vignetting
-            .map_or(String::new(), |a| format!(", vignetting {a:.3}")),
+            .map_or(String::new(), |a| format!(", vignetting {a:.3}"))
+            + &result
+                .ambient
+                .map_or(String::new(), |c| format!(", ambient {c:.3}")),
         result.losses.first().copied().unwrap_or(f64::NAN),
         result.losses.last().copied().unwrap_or(f64::NAN),
         result.losses.len(),

@@ -211,20 +211,14 @@ impl Scene {
         camera.develop(&self.light(highlight)?, rng)
     }
 
-    /// Reflectance under a uniform white sky, (3, S, S): `diffuse` plus every 3-channel map
-    /// whose name starts with `specular` (a GGX lobe's F0 approximates its directional albedo;
-    /// see [`super::camera`]). Zero for a model with neither.
+    /// Reflectance under a uniform white sky, (3, S, S): the maps' own
+    /// ([`MaterialMaps::ambient_reflectance`]), zero for a model with no diffuse or specular
+    /// map.
     pub fn ambient_reflectance(&self) -> Result<PlanarImage> {
-        let mut total = PlanarImage::filled(3, self.size, self.size, 0.0);
-        for (name, map) in self.maps.iter() {
-            if (name == "diffuse" || name.starts_with("specular")) && map.dim(1)? == 3 {
-                let image = PlanarImage::from_tensor(map)?;
-                for (t, v) in total.data.iter_mut().zip(&image.data) {
-                    *t += v;
-                }
-            }
+        match self.maps.ambient_reflectance()? {
+            Some(total) => PlanarImage::from_tensor(&total),
+            None => Ok(PlanarImage::filled(3, self.size, self.size, 0.0)),
         }
-        Ok(total)
     }
 }
 
