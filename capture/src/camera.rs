@@ -49,11 +49,11 @@ impl CameraTerms {
         ambient: Option<f64>,
     ) -> candle_core::Result<Self> {
         let scalar = |v: f64| Var::from_tensor(&Tensor::new(&[v as f32], &Device::Cpu)?);
-        if vignetting.is_some_and(|a| !(a > 0.0 && a < 1.0)) {
-            candle_core::bail!("vignetting strength {vignetting:?} is outside (0, 1)");
+        if let Some(a) = vignetting.filter(|a| !(*a > 0.0 && *a < 1.0)) {
+            candle_core::bail!("vignetting strength {a} is outside (0, 1)");
         }
-        if ambient.is_some_and(|c| !(c > 0.0 && c.is_finite())) {
-            candle_core::bail!("ambient radiance {ambient:?} is not a positive number");
+        if let Some(c) = ambient.filter(|c| !(*c > 0.0 && c.is_finite())) {
+            candle_core::bail!("ambient radiance {c} is not a positive number");
         }
         Ok(Self {
             log_gain: scalar(log_gain)?,
@@ -104,6 +104,12 @@ impl CameraTerms {
     /// The gain's log.
     pub fn log_gain(&self) -> candle_core::Result<f64> {
         Ok(self.log_gain.as_tensor().to_vec1::<f32>()?[0] as f64)
+    }
+
+    /// Whether the ambient term is fitted: only then does [`Self::expose`] read a
+    /// reflectance.
+    pub fn fits_ambient(&self) -> bool {
+        self.ambient_log.is_some()
     }
 
     /// The ambient radiance c, when it is fitted.

@@ -422,7 +422,12 @@ impl Input {
     ) -> anyhow::Result<(MaterialMaps, Tensor)> {
         let maps = brdf.decode(raw)?.with_texel_size(Some(self.texel));
         let radiance = render_radiance_with(brdf.as_ref(), &maps, &self.geometry)?;
-        let reflectance = maps.ambient_reflectance()?;
+        // The sum of the reflecting maps is built only where the ambient term reads it.
+        let reflectance = if terms.fits_ambient() {
+            maps.ambient_reflectance()?
+        } else {
+            None
+        };
         let exposed = terms.expose(&radiance, reflectance.as_ref(), &self.rho2)?;
         Ok((maps, encode_display(&exposed)?))
     }
