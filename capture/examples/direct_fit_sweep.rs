@@ -21,6 +21,7 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use candle_core::Tensor;
 use photomat_brdfs as _; // link the built-in BRDF plugins
 use photomat_capture::evaluate::{
     channel_scale, held_out_l1, map_errors, radiance_on_square, read_held_out,
@@ -117,6 +118,23 @@ fn main() -> anyhow::Result<()> {
                 "| {name} | {family} | truth maps | | {:.4} | | | | | |",
                 held_out_l1(&held, &truth_held)?
             );
+            // What flat normals alone cost: the true maps with their normal map set to +z.
+            if let Ok(normal) = maps.get("normal") {
+                let up = Tensor::cat(
+                    &[
+                        normal.narrow(1, 0, 2)?.zeros_like()?,
+                        normal.narrow(1, 2, 1)?.ones_like()?,
+                    ],
+                    1,
+                )?;
+                let mut flat = maps.clone();
+                flat.insert("normal", up);
+                let held = radiance_on_square(&truth.brdf, &flat, &lights, side)?;
+                println!(
+                    "| {name} | {family} | truth maps, flat normals | | {:.4} | | | | | |",
+                    held_out_l1(&held, &truth_held)?
+                );
+            }
         }
         for (w, (warmup, flags)) in configs.iter().enumerate() {
             let options = CaptureOptions {
