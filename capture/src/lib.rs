@@ -162,7 +162,8 @@ pub struct CaptureOptions {
     /// a model without diffuse or specular maps. Default off: with the vignetting it is not
     /// identifiable on a uniform material (both change the falloff's quadratic term), and on
     /// 8 simulated photos it relit 0.0750 → 0.0708 under held-out flashes, better on car
-    /// paint, worse on stone (docs/benchmarks.md, "A fitted ambient term").
+    /// paint, worse on stone; on 8 Mitsuba photos lit by the flash alone, 0.0398 → 0.0401
+    /// (docs/benchmarks.md, "A fitted ambient term").
     pub ambient: bool,
     /// Maps of the model fitted as one value over the whole square (e.g. `specular`,
     /// `roughness` of a material that varies in colour and relief only), so that they cannot
