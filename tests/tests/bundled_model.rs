@@ -22,9 +22,9 @@ fn bundled() -> PathBuf {
 const MAX_BUNDLED_BYTES: u64 = 8 << 20;
 
 /// Mean analytic-vs-neural L1 (encoded [−1, 1] space, 5 lights, 512²) the bundled estimator
-/// must stay under. Measured at training time: 0.054 trained vs 0.121 for an estimator after
-/// one step on the same GAN (models/demo/README.md); the bound sits between the two, so a
-/// broken or untrained model fails.
+/// must stay under. Measured at training time: 0.054 trained (models/demo/README.md), and
+/// 0.121 for an estimator after one step on an earlier bundled GAN; the bound sits between
+/// the two, so a broken or untrained model fails.
 const MAX_L1: f64 = 0.08;
 
 /// Bytes of the files under `dir`, sub-folders included.
