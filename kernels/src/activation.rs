@@ -21,17 +21,16 @@ use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Result, Shape, Tensor, bail};
 use rayon::prelude::*;
 
+use crate::alloc::output_buffer;
+
 /// Elements per rayon task. Tensors up to this size run on the calling thread; candle splits
 /// its own element-wise ops from the same size (65,536 elements, one 256² channel) on.
 const CHUNK: usize = 1 << 16;
 
 /// `out[i] = f(a[i], b[i])`, split over rayon tasks of [`CHUNK`] elements.
-fn zip_map<T: Copy + Send + Sync + Default>(
-    a: &[T],
-    b: &[T],
-    f: impl Fn(T, T) -> T + Sync,
-) -> Vec<T> {
-    let mut out = vec![T::default(); a.len()];
+fn zip_map<T: candle_core::WithDType>(a: &[T], b: &[T], f: impl Fn(T, T) -> T + Sync) -> Vec<T> {
+    // SAFETY: `run` writes every element of every chunk.
+    let mut out = unsafe { output_buffer(a.len()) };
     let run = |(o, (a, b)): (&mut [T], (&[T], &[T]))| {
         for ((o, &a), &b) in o.iter_mut().zip(a).zip(b) {
             *o = f(a, b);
@@ -126,7 +125,8 @@ impl BiasLeakyRelu {
         let (p, n) = (T::from_f64(self.gain), T::from_f64(self.gain * self.slope));
         let zero = T::from_f64(0.0);
         let channels = bias.len();
-        let mut out = vec![zero; x.len()];
+        // SAFETY: `row` writes every element of every row.
+        let mut out = unsafe { output_buffer(x.len()) };
         let row = |(r, (o, x)): (usize, (&mut [T], &[T]))| {
             let b = bias[r % channels];
             for (o, &x) in o.iter_mut().zip(x) {

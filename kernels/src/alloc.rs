@@ -48,6 +48,31 @@ pub fn keep_freed_pages() {
     unsafe { libmimalloc_sys::mi_option_set(MI_OPTION_PURGE_DELAY, -1) }
 }
 
+/// A buffer of `len` elements for an op's output that the op writes whole before anything
+/// reads it: allocated without the zero-fill that `vec![0; len]` pays for. With mimalloc
+/// keeping freed pages ([`keep_freed_pages`]) that fill was a memset of every output, 8–9 % of
+/// a training step's samples (`docs/benchmarks.md`, "Outputs without a zero-fill"). candle's
+/// own CPU ops get their outputs the same way (`alloc_uninit` of its CPU device). Builds with
+/// debug assertions (the test profile) fill the buffer with NaN instead, so that an element an
+/// op forgets to write fails the equivalence tests rather than reading stale memory.
+///
+/// # Safety
+/// The caller writes every element before reading any; `T` is a plain float (`WithDType`:
+/// every bit pattern is a value, nothing to drop).
+pub(crate) unsafe fn output_buffer<T: candle_core::WithDType>(len: usize) -> Vec<T> {
+    if cfg!(debug_assertions) {
+        return vec![T::from_f64(f64::NAN); len];
+    }
+    let mut v = Vec::with_capacity(len);
+    // SAFETY: capacity `len` was just reserved; the contract above makes the caller write the
+    // elements before they are read, and every bit pattern of `T` is a valid value.
+    #[allow(clippy::uninit_vec)]
+    unsafe {
+        v.set_len(len)
+    };
+    v
+}
+
 /// Threads the kernels of this crate and candle's CPU ops use: `RAYON_NUM_THREADS` when set
 /// to a positive integer, else the number of physical cores (candle's rule).
 pub fn thread_count() -> usize {

@@ -33,6 +33,8 @@ use candle_core::{CpuStorage, CustomOp2, DType, Layout, Result, Shape, Tensor, W
 use gemm::Parallelism;
 use rayon::prelude::*;
 
+use crate::alloc::output_buffer;
+
 /// Target size of one band of `col(x)`: small enough to stay in the last-level cache (32 MiB
 /// shared on the build machine, 1 MiB L2 per core) while `gemm` packs it, large enough that
 /// `gemm` sees ≥ a few hundred columns (≈ 900 for a 3×3 64-channel f32 layer). Chosen from
@@ -456,7 +458,9 @@ pub(crate) fn forward_into<T: WithDType>(
     let maps: Vec<TapMap> = (0..g.kw).map(|kx| g.column_map(kx)).collect();
     let band = g.band_rows(size_of::<T>());
     over_batch(g.b, threads, |first, count, gemm_threads| {
-        let mut col = vec![T::from_f64(0.0); if g.is_pointwise() { 0 } else { k * band * g.wo }];
+        // SAFETY: `im2col` (or, for the input gradient, a product that does not read its
+        // destination) writes the part of `col` a band uses before it is read.
+        let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
         for i in first..first + count {
             let xi = &x[i * x_len..(i + 1) * x_len];
             // SAFETY: tasks own disjoint image ranges `first..first + count`, so the output
@@ -494,7 +498,9 @@ fn input_grad_into<T: WithDType>(g: &Geometry, dy: &[T], w: &[T], dx: &mut [T], 
     let maps: Vec<TapMap> = (0..g.kw).map(|kx| g.column_map(kx)).collect();
     let band = g.band_rows(size_of::<T>());
     over_batch(g.b, threads, |first, count, gemm_threads| {
-        let mut col = vec![T::from_f64(0.0); if g.is_pointwise() { 0 } else { k * band * g.wo }];
+        // SAFETY: `im2col` (or, for the input gradient, a product that does not read its
+        // destination) writes the part of `col` a band uses before it is read.
+        let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
         for i in first..first + count {
             let dyi = &dy[i * y_len..(i + 1) * y_len];
             // SAFETY: as in `forward_into`, tasks write disjoint images.
@@ -541,7 +547,9 @@ fn weight_grad_into<T: WithDType>(g: &Geometry, x: &[T], dy: &[T], dw: &mut [T],
     let band = g.band_rows(size_of::<T>());
     let partials = over_batch(g.b, threads, |first, count, gemm_threads| {
         let mut acc = vec![T::from_f64(0.0); g.co * k];
-        let mut col = vec![T::from_f64(0.0); if g.is_pointwise() { 0 } else { k * band * g.wo }];
+        // SAFETY: `im2col` (or, for the input gradient, a product that does not read its
+        // destination) writes the part of `col` a band uses before it is read.
+        let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
         for i in first..first + count {
             let xi = &x[i * x_len..(i + 1) * x_len];
             let dyi = &dy[i * y_len..(i + 1) * y_len];
@@ -628,7 +636,8 @@ fn run(
         len: usize,
         threads: usize,
     ) -> Vec<T> {
-        let mut out = vec![T::from_f64(0.0); len];
+        // SAFETY: each of the three `_into` functions writes every element of its output.
+        let mut out = unsafe { output_buffer(len) };
         match kind {
             Kind::Forward => forward_into(g, a, b, &mut out, threads),
             Kind::InputGrad => input_grad_into(g, a, b, &mut out, threads),

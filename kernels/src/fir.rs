@@ -25,6 +25,8 @@ use candle_core::backend::BackendStorage;
 use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Result, Shape, Tensor, bail};
 use rayon::prelude::*;
 
+use crate::alloc::output_buffer;
+
 /// Output elements from which a pass is split over rayon tasks (candle splits its own
 /// element-wise ops from the same size, one 256² plane).
 const PARALLEL_ELEMENTS: usize = 1 << 16;
@@ -387,7 +389,8 @@ impl AxisPass {
     }
 
     fn run<T: candle_core::WithDType>(&self, x: &[T], dims: &[usize], len: usize) -> Vec<T> {
-        let mut out = vec![T::from_f64(0.0); len];
+        // SAFETY: both passes write every element (an empty row as zeros).
+        let mut out = unsafe { output_buffer(len) };
         match self.axis {
             Axis::Height => height_pass(&self.m, x, dims[3], &mut out),
             Axis::Width => width_pass(&self.m, x, &mut out),

@@ -50,6 +50,8 @@ use candle_core::{
 use gemm::Parallelism;
 use rayon::prelude::*;
 
+use crate::alloc::output_buffer;
+
 /// Texel rows per block. A block's working set backward is three activation buffers of
 /// `BLOCK_ROWS × 64` values (192 KiB in f32) plus the weights, well inside the 1 MiB L2 per
 /// core of the build machine, and `gemm` still sees 256-row operands.
@@ -666,7 +668,8 @@ impl Forward {
         let params = operand::<T>(params.0, params.1, net.param_len(), "the parameters")?;
         let wts = Weights::new(net, params);
         let (l, hid, d0, dl) = (net.layers(), net.hidden(), net.in_width(), net.out_width());
-        let mut out = vec![T::zero(); io.output_len()];
+        // SAFETY: the blocks cover every row and `scatter.put` writes each block's outputs.
+        let mut out = unsafe { output_buffer(io.output_len()) };
         let scatter = Scatter::new(&mut out);
         let blocks = io.blocks();
         let per_row = (l - 1) * hid;

@@ -21,6 +21,7 @@ use candle_core::{CpuStorage, CustomOp3, DType, Layout, Result, Shape, Tensor, W
 use rayon::prelude::*;
 
 use crate::activation::{LeakyReluGrad, slice};
+use crate::alloc::output_buffer;
 
 /// `gain · LeakyReLU(x + noise + bias, slope)`, noise broadcast over channels, bias over
 /// batch and pixels; slope ∈ [0, 1], gain > 0.
@@ -79,7 +80,8 @@ impl NoiseBiasLeakyRelu {
         let (p, n) = (T::from_f64(self.gain), T::from_f64(self.gain * self.slope));
         let zero = T::from_f64(0.0);
         let channels = bias.len();
-        let mut out = vec![zero; x.len()];
+        // SAFETY: `plane` writes every element of every plane.
+        let mut out = unsafe { output_buffer(x.len()) };
         let plane = |(i, (o, x)): (usize, (&mut [T], &[T]))| {
             let (b, c) = (i / channels, i % channels);
             let nz = &noise[b * hw..(b + 1) * hw];
