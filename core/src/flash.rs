@@ -20,6 +20,12 @@ pub const PLANE_SIDE: f64 = 1.0;
 pub const PHOTO_SIDE: f64 = 2.0;
 /// Height of the collocated camera and flash above the plane.
 pub const FLASH_HEIGHT: f64 = 1.0;
+/// Smallest flash elevation cosine ω_z a texel of a whole prepared photo sees when the
+/// highlight is at the photo's centre: its corner, √2 away horizontally under the flash at
+/// height 1, gives 1/√3. The relighting MLP M learns from such photos, so texels lit more
+/// obliquely than this (a material larger than a photo under one flash) are outside what it
+/// was trained on; [`FlashGeometry::within_photo_reach`] marks the others.
+pub const PHOTO_REACH_MIN_COS: f64 = 0.577_350_269_189_625_8;
 /// Flash intensity: π, so that a flat white Lambertian texel straight under the flash
 /// renders exactly its albedo (π · (1/π) · cos 0 / 1²).
 pub const FLASH_INTENSITY: f64 = std::f64::consts::PI;
@@ -133,6 +139,19 @@ impl FlashGeometry {
         })
     }
 
+    /// 1 where a texel sees the flash at least as steeply as the corner of a whole photo under
+    /// a centred flash (ω_z ≥ [`PHOTO_REACH_MIN_COS`]), 0 elsewhere: the texels whose
+    /// lighting a model trained on photos has seen.
+    ///
+    /// # Shapes
+    /// → (B, 1, R, R), the dtype of ω.
+    pub fn within_photo_reach(&self) -> Result<Tensor> {
+        let omega_z = self.omega.narrow(1, 2, 1)?;
+        // The corner texel itself sits at exactly 1/√3; half an f32 step below keeps it in.
+        let threshold = PHOTO_REACH_MIN_COS * (1.0 - f32::EPSILON as f64);
+        Ok(omega_z.ge(threshold)?.to_dtype(omega_z.dtype())?)
+    }
+
     /// Geometry over an R×R grid covering a centred square of side `side`, flash still at
     /// height [`FLASH_HEIGHT`] (side 2 is a whole photo whose H×H crops are unit squares).
     pub fn with_side(
@@ -184,5 +203,43 @@ impl FlashGeometry {
             omega: Tensor::from_vec(omega, (n, 3, size, size), device)?.to_dtype(dtype)?,
             inv_dist2: Tensor::from_vec(inv_dist2, (n, 1, size, size), device)?.to_dtype(dtype)?,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every texel of a whole photo under a centred flash is within reach; on a square twice
+    /// as wide, exactly the texels whose centre lies within √2 of the highlight are.
+    #[test]
+    fn photo_reach_is_the_disc_of_a_photo_corner() -> Result<()> {
+        let photo = FlashGeometry::with_side(
+            &[Highlight::CENTER],
+            64,
+            PHOTO_SIDE,
+            DType::F32,
+            &Device::Cpu,
+        )?;
+        let inside = photo.within_photo_reach()?.sum_all()?.to_scalar::<f32>()?;
+        assert_eq!(inside, 64.0 * 64.0);
+
+        let highlight = Highlight::new(0.3, -0.2);
+        let side = 2.0 * PHOTO_SIDE;
+        let wide = FlashGeometry::with_side(&[highlight], 48, side, DType::F64, &Device::Cpu)?;
+        let mask = wide.within_photo_reach()?.flatten_all()?.to_vec1::<f64>()?;
+        for row in 0..48 {
+            for col in 0..48 {
+                let p = texel_center_on(row, col, 48, side);
+                let horizontal = ((p.x - highlight.x).powi(2) + (p.y - highlight.y).powi(2)).sqrt();
+                let expected = if horizontal <= 2f64.sqrt() { 1.0 } else { 0.0 };
+                assert_eq!(
+                    mask[row * 48 + col],
+                    expected,
+                    "texel ({row}, {col}) at {horizontal}"
+                );
+            }
+        }
+        Ok(())
     }
 }

@@ -215,6 +215,14 @@ fn sample_is_deterministic_per_seed_and_writes_loadable_outputs() {
     for m in summary["materials"].as_array().unwrap() {
         let l1 = m["l1_per_light"].as_array().unwrap();
         assert_eq!(l1.len(), 5);
+        // A fixed-size model's unit-square material lies whole within a photo's reach of
+        // each of the five flashes: both figures are over the same texels.
+        // (Summed in another order: equal to f32 rounding.)
+        let in_reach = m["l1_within_photo_reach_per_light"].as_array().unwrap();
+        assert_eq!(in_reach.len(), l1.len());
+        for (near, all) in in_reach.iter().zip(l1) {
+            assert!((near.as_f64().unwrap() - all.as_f64().unwrap()).abs() < 1e-6);
+        }
         assert!(
             l1.iter()
                 .all(|v| (0.0..=1.0).contains(&v.as_f64().unwrap()))

@@ -191,9 +191,18 @@ fn report(
             String::new()
         }
     )?;
+    // Larger than a photo, a material has texels M never saw lit that obliquely.
+    let in_reach = if (summary.l1_within_photo_reach - summary.l1_mean).abs() > 1e-9 {
+        format!(
+            " ({:.4} within a photo's reach of the flash)",
+            summary.l1_within_photo_reach
+        )
+    } else {
+        String::new()
+    };
     writeln!(
         out,
-        "  {}  L1 analytic vs neural (encoded): {:.4} mean; {:.1} materials/min",
+        "  {}  L1 analytic vs neural (encoded): {:.4} mean{in_reach}; {:.1} materials/min",
         args.out.join(SUMMARY_FILE).display(),
         summary.l1_mean,
         summary.materials_per_minute

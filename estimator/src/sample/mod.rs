@@ -332,6 +332,7 @@ impl Sampler {
             candidates: &candidates,
             tolerance,
             geometry: &geometry,
+            in_photo_reach: geometry.within_photo_reach()?,
             size: resolution,
             tile: options.render_size.unwrap_or(resolution),
         };
@@ -399,6 +400,9 @@ struct Job<'a> {
     candidates: &'a [&'a EstimatorModel],
     tolerance: Option<f64>,
     geometry: &'a FlashGeometry,
+    /// `geometry`'s texels within a photo's reach of their flash (L, 1, R, R)
+    /// ([`FlashGeometry::within_photo_reach`]).
+    in_photo_reach: Tensor,
     /// Side of each material in texels.
     size: usize,
     /// Side of each render and preview in the sheets.
@@ -582,6 +586,7 @@ impl Job<'_> {
         } else {
             None
         };
+        let l1_in_reach = per_light_l1_within(&analytic, &neural, &self.in_photo_reach)?;
         Ok(Material {
             summary: MaterialSummary {
                 seed,
@@ -591,6 +596,8 @@ impl Job<'_> {
                 simplification,
                 l1_mean: mean(&l1),
                 l1_per_light: l1,
+                l1_within_photo_reach: finite_mean(&l1_in_reach),
+                l1_within_photo_reach_per_light: l1_in_reach,
             },
             sheet_row,
         })
@@ -724,9 +731,53 @@ pub(crate) fn per_light_l1(a: &Tensor, b: &Tensor) -> anyhow::Result<Vec<f64>> {
         .to_vec1()?)
 }
 
+/// Per light, the mean |a − b| over the texels where `mask` is 1: (L, C, R, R) renders and an
+/// (L, 1, R, R) 0/1 mask give L values, NaN for a light whose mask is empty.
+pub(crate) fn per_light_l1_within(
+    a: &Tensor,
+    b: &Tensor,
+    mask: &Tensor,
+) -> anyhow::Result<Vec<f64>> {
+    let channels = a.dim(1)? as f64;
+    let mask = mask.to_dtype(a.dtype())?;
+    let sums: Vec<f64> = (a - b)?
+        .abs()?
+        .broadcast_mul(&mask)?
+        .flatten_from(1)?
+        .sum(1)?
+        .to_dtype(DType::F64)?
+        .to_vec1()?;
+    let counts: Vec<f64> = mask
+        .flatten_from(1)?
+        .sum(1)?
+        .to_dtype(DType::F64)?
+        .to_vec1()?;
+    Ok(sums
+        .iter()
+        .zip(&counts)
+        .map(|(s, n)| {
+            if *n > 0.0 {
+                s / (n * channels)
+            } else {
+                f64::NAN
+            }
+        })
+        .collect())
+}
+
 /// The mean of a non-empty list.
 fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len() as f64
+}
+
+/// The mean of the finite values of a list; NaN when there is none.
+pub(crate) fn finite_mean(values: &[f64]) -> f64 {
+    let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    if finite.is_empty() {
+        f64::NAN
+    } else {
+        mean(&finite)
+    }
 }
 
 /// Greatest common divisor (Euclid).
@@ -785,4 +836,31 @@ fn clear_previous_samples(out: &Path, overwrite: bool) -> anyhow::Result<()> {
         )
     })?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The masked L1 averages over the masked texels only, and is NaN where none is.
+    #[test]
+    fn l1_within_a_mask_averages_only_the_masked_texels() -> anyhow::Result<()> {
+        let device = candle_core::Device::Cpu;
+        // Two lights, 3 channels, 2×2 texels: |a − b| is 0.1 on the left column, 0.5 on the right.
+        let diff =
+            Tensor::new(&[[0.1f32, 0.5], [0.1, 0.5]], &device)?.broadcast_as((2, 3, 2, 2))?;
+        let b = Tensor::zeros((2, 3, 2, 2), DType::F32, &device)?;
+        let a = (&b + diff)?;
+        let left = Tensor::new(&[[1f32, 0.0], [1.0, 0.0]], &device)?.reshape((1, 1, 2, 2))?;
+        let mask = Tensor::cat(
+            &[left, Tensor::zeros((1, 1, 2, 2), DType::F32, &device)?],
+            0,
+        )?;
+        let l1 = per_light_l1_within(&a, &b, &mask)?;
+        assert!((l1[0] - 0.1).abs() < 1e-7, "{l1:?}");
+        assert!(l1[1].is_nan());
+        assert!((finite_mean(&l1) - 0.1).abs() < 1e-7);
+        assert!((mean(&per_light_l1(&a, &b)?) - 0.3).abs() < 1e-7);
+        Ok(())
+    }
 }

@@ -58,6 +58,13 @@ pub struct MaterialSummary {
     pub l1_per_light: Vec<f64>,
     /// Mean of [`Self::l1_per_light`].
     pub l1_mean: f64,
+    /// The same L1 over the texels within a photo's reach of the flash
+    /// (`FlashGeometry::within_photo_reach`): where M relights under geometry it was trained
+    /// on. Equal to [`Self::l1_per_light`] for a material no larger than a photo; NaN (JSON
+    /// null) for a light that reaches none of the material's texels.
+    pub l1_within_photo_reach_per_light: Vec<f64>,
+    /// Mean of the finite values of [`Self::l1_within_photo_reach_per_light`].
+    pub l1_within_photo_reach: f64,
 }
 
 /// The run: `OUT/summary.json`.
@@ -89,6 +96,8 @@ pub struct SampleSummary {
     pub l1_per_light: Vec<f64>,
     /// Mean of [`Self::l1_per_light`].
     pub l1_mean: f64,
+    /// Mean over materials (of their finite values) of [`MaterialSummary::l1_within_photo_reach`].
+    pub l1_within_photo_reach: f64,
     /// Wall time per stage.
     pub timings_s: Timings,
     /// Materials per minute of the per-material stages.
@@ -168,6 +177,8 @@ impl SampleSummary {
             .map(|i| materials.iter().map(|m| m.l1_per_light[i]).sum::<f64>() / n)
             .collect();
         let l1_mean = l1_per_light.iter().sum::<f64>() / l1_per_light.len() as f64;
+        let in_reach: Vec<f64> = materials.iter().map(|m| m.l1_within_photo_reach).collect();
+        let l1_within_photo_reach = super::finite_mean(&in_reach);
         // The floor keeps the rate finite for a run too fast to time.
         let materials_per_minute = 60.0 * n / timings.per_material().max(f64::MIN_POSITIVE);
         let mut brdf_counts = std::collections::BTreeMap::new();
@@ -187,6 +198,7 @@ impl SampleSummary {
             materials,
             l1_per_light,
             l1_mean,
+            l1_within_photo_reach,
             timings_s: timings,
             materials_per_minute,
         }
@@ -206,6 +218,8 @@ mod tests {
             selection: None,
             simplification: None,
             l1_mean: l1.iter().sum::<f64>() / l1.len() as f64,
+            l1_within_photo_reach: l1[0],
+            l1_within_photo_reach_per_light: vec![l1[0], f64::NAN],
             l1_per_light: l1,
         };
         let timings = Timings {
@@ -229,6 +243,7 @@ mod tests {
         assert!((s.l1_per_light[0] - 0.2).abs() < 1e-12);
         assert!((s.l1_per_light[1] - 0.4).abs() < 1e-12);
         assert!((s.l1_mean - 0.3).abs() < 1e-12);
+        assert!((s.l1_within_photo_reach - 0.2).abs() < 1e-12);
         // Two materials in the 3 s of per-material stages (loading excluded): 40 per minute.
         assert!((s.materials_per_minute - 40.0).abs() < 1e-9);
     }
@@ -249,6 +264,8 @@ mod tests {
             simplification: record,
             l1_per_light: vec![0.0],
             l1_mean: 0.0,
+            l1_within_photo_reach_per_light: vec![0.0],
+            l1_within_photo_reach: 0.0,
         };
         let record = |steps, before, after, e0, e1| SimplifyRecord {
             tolerance: 0.1,
