@@ -195,4 +195,11 @@ impl TrainingData for DatasetSource {
             SourceMode::Patches(options) => patch_side(options.size, self.dataset.size()),
         }
     }
+
+    fn sample_texels(&self) -> usize {
+        match self.mode {
+            SourceMode::Crops { size } => size,
+            SourceMode::Patches(options) => options.size,
+        }
+    }
 }

@@ -223,6 +223,10 @@ impl TrainingData for Poisoned {
     fn sample_side(&self) -> f64 {
         self.inner.sample_side()
     }
+
+    fn sample_texels(&self) -> usize {
+        self.inner.sample_texels()
+    }
 }
 
 #[test]

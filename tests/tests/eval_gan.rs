@@ -111,7 +111,7 @@ fn eval_gan_untrained_model_is_far_from_the_data() {
     use photomat_data::source::DatasetSource;
     use photomat_generator::GanModel;
     use photomat_generator::swd::model::real_crops;
-    use photomat_generator::swd::{SwdConfig, model_swd, sliced_wasserstein};
+    use photomat_generator::swd::{FakeWindows, SwdConfig, model_swd, sliced_wasserstein};
 
     let dir = tempfile::tempdir().unwrap();
     let data = DatasetSource::open(&simulated_dataset(dir.path(), 64), 32).unwrap();
@@ -128,9 +128,17 @@ fn eval_gan_untrained_model_is_far_from_the_data() {
         &Device::Cpu,
     )
     .unwrap();
-    let fakes = model_swd(&model, &data, count, 1, None, &config, &mut |_, _| {})
-        .unwrap()
-        .mean;
+    let fakes = model_swd(
+        &model,
+        &data,
+        count,
+        1,
+        FakeWindows::Native,
+        &config,
+        &mut |_, _| {},
+    )
+    .unwrap()
+    .mean;
     eprintln!("SWD×1e3 real/real {floor:.1}, untrained model/real {fakes:.1}");
     assert!(fakes > 2.0 * floor, "model {fakes} vs floor {floor}");
 }
@@ -139,6 +147,7 @@ fn eval_gan_untrained_model_is_far_from_the_data() {
 fn size_generalisation_fakes_are_windows_of_larger_samples() {
     use candle_core::Device;
     use photomat_data::source::DatasetSource;
+    use photomat_generator::swd::FakeWindows;
     use photomat_generator::swd::model::relit_samples;
     use photomat_generator::{GanModel, GeneratorConfig, SpatialConfig};
 
@@ -153,7 +162,10 @@ fn size_generalisation_fakes_are_windows_of_larger_samples() {
     };
     let data = DatasetSource::for_model(&simulated_dataset(dir.path(), 64), &config).unwrap();
     let model = GanModel::new(&config, 5, &Device::Cpu).unwrap();
-    let fakes = |side| relit_samples(&model, &data, 3, 7, side, &mut |_| {});
+    let fakes = |side: Option<usize>| {
+        let windows = side.map_or(FakeWindows::Native, FakeWindows::OfSamples);
+        relit_samples(&model, &data, 3, 7, windows, &mut |_| {})
+    };
     let native = fakes(None).unwrap();
     assert_eq!(native.dims(), [3, 3, 32, 32]);
     // Side R is the default; a larger side gives windows of the same shape from other,
@@ -171,4 +183,57 @@ fn size_generalisation_fakes_are_windows_of_larger_samples() {
     assert!(moved.to_scalar::<f32>().unwrap() > 0.0);
     let err = fakes(Some(16)).unwrap_err().to_string();
     assert!(err.contains("smaller than the model's 32×32"), "{err}");
+}
+
+/// A fixed-size model stretched to native patches: where the photos' texel is the model's
+/// (64² photos, side 2, and a 32² unit-square model: both 1/32), the stretch is the identity
+/// and the fakes are the model's own relit materials; on 128² photos (texel 1/64) each
+/// material spans 64 texels and the fakes are its centre 32² windows, other images.
+#[test]
+fn stretched_fakes_are_the_fixed_model_at_the_photos_texel_size() {
+    use candle_core::Device;
+    use photomat_data::patch::PatchOptions;
+    use photomat_data::source::DatasetSource;
+    use photomat_generator::GanModel;
+    use photomat_generator::swd::FakeWindows;
+    use photomat_generator::swd::model::relit_samples;
+
+    let dir = tempfile::tempdir().unwrap();
+    let model = GanModel::new(
+        &photomat_tests::cli_fixtures::tiny_gan_config(32),
+        5,
+        &Device::Cpu,
+    )
+    .unwrap();
+    let patches = |photos| {
+        let options = PatchOptions {
+            size: 32,
+            highlight_prob: 0.5,
+        };
+        let path = simulated_dataset(&dir.path().join(format!("p{photos}")), photos);
+        DatasetSource::open_patches(&path, options).unwrap()
+    };
+    let at_model_scale = patches(64);
+    let fakes = |data: &DatasetSource, windows| {
+        relit_samples(&model, data, 3, 7, windows, &mut |_| {}).unwrap()
+    };
+    let native = fakes(&at_model_scale, FakeWindows::Native);
+    let stretched = fakes(&at_model_scale, FakeWindows::Stretched);
+    assert_eq!(stretched.dims(), [3, 3, 32, 32]);
+    let diff = (&stretched - &native)
+        .unwrap()
+        .abs()
+        .unwrap()
+        .max_all()
+        .unwrap();
+    assert!(diff.to_scalar::<f32>().unwrap() < 1e-5);
+
+    let finer = patches(128);
+    let twice = fakes(&finer, FakeWindows::Stretched);
+    assert_eq!(twice.dims(), [3, 3, 32, 32]);
+    let moved = (&twice - fakes(&finer, FakeWindows::Native))
+        .unwrap()
+        .abs()
+        .unwrap();
+    assert!(moved.max_all().unwrap().to_scalar::<f32>().unwrap() > 1e-3);
 }

@@ -29,9 +29,11 @@ use candle_core::Device;
 use photomat_data::discriminator_probe::{BLUR_RADII, DiscriminatorProbe, probe_discriminator};
 use photomat_data::highlight::DetectorKind;
 use photomat_data::light_following::{LightFollowing, light_following};
+use photomat_data::patch::PatchOptions;
 use photomat_data::source::DatasetSource;
 use photomat_generator::GanModel;
-use photomat_generator::swd::{EvalPhase, SwdConfig, SwdReport, model_swd};
+use photomat_generator::swd::{EvalPhase, FakeWindows, SwdConfig, SwdReport, model_swd};
+use photomat_generator::train::config::DEFAULT_HIGHLIGHT_PROB;
 use serde_json::json;
 
 use crate::common::{parse_detector, progress_bar};
@@ -70,6 +72,15 @@ pub struct Args {
           value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub sample_size: Option<u32>,
 
+    /// For a fixed-size model: compare at the photos' native scale, as a spatial model is.
+    /// Each fake is the model's unit-square material stretched to the data set's texel size
+    /// (bilinear on the neural material F) and cut to its centre P×P window, against P×P
+    /// native-scale patches of the data set: the baseline an any-size generator's SWD is
+    /// compared with.
+    #[arg(long, value_name = "P", conflicts_with = "sample_size",
+          value_parser = clap::value_parser!(u32).range(16..=4096))]
+    pub stretched_to_patches: Option<u32>,
+
     /// Also report what the run's discriminator looks at: its mean logit on reals, on reals
     /// under other samples' lights, on blurred reals and on fakes (RUN must be a `photomat
     /// train-gan` run folder: train.json + train_state.safetensors). A D that scores blurred
@@ -87,7 +98,30 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let model = GanModel::load(&args.gan, &device)
         .with_context(|| format!("cannot load the GAN model in '{}'", args.gan.display()))?;
     let side = model.config().resolution;
-    let data = DatasetSource::for_model(&args.data, model.config()).with_context(|| {
+    let (data, windows, side) = match (args.stretched_to_patches, args.sample_size) {
+        (Some(_), _) if model.config().spatial.is_some() => anyhow::bail!(
+            "--stretched-to-patches is for fixed-size models; '{}' is spatial (its samples \
+             are already at the photos' scale)",
+            args.gan.display()
+        ),
+        (Some(p), _) => {
+            let patches = PatchOptions {
+                size: p as usize,
+                highlight_prob: DEFAULT_HIGHLIGHT_PROB,
+            };
+            let data = DatasetSource::open_patches(&args.data, patches);
+            (data, FakeWindows::Stretched, p as usize)
+        }
+        (None, Some(n)) => {
+            let data = DatasetSource::for_model(&args.data, model.config());
+            (data, FakeWindows::OfSamples(n as usize), side)
+        }
+        (None, None) => {
+            let data = DatasetSource::for_model(&args.data, model.config());
+            (data, FakeWindows::Native, side)
+        }
+    };
+    let data = data.with_context(|| {
         format!(
             "cannot compare the {side}×{side} model in '{}' with the data set '{}'",
             args.gan.display(),
@@ -106,7 +140,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         &data,
         count,
         args.seed,
-        args.sample_size.map(|n| n as usize),
+        windows,
         &SwdConfig::default(),
         &mut |phase, done| match phase {
             EvalPhase::Fakes => {
@@ -186,6 +220,7 @@ fn print_report(
             "data": args.data.display().to_string(),
             "resolution": side,
             "sample_size": args.sample_size.map_or(side, |n| n as usize),
+            "stretched_to_patches": args.stretched_to_patches,
             "count": count,
             "seed": args.seed,
             "levels": levels,
@@ -197,9 +232,10 @@ fn print_report(
         writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
         return Ok(());
     }
-    let cut = match args.sample_size {
-        Some(n) => format!(", windows of {n}×{n} samples"),
-        None => String::new(),
+    let cut = match (args.sample_size, args.stretched_to_patches) {
+        (Some(n), _) => format!(", windows of {n}×{n} samples"),
+        (_, Some(_)) => ", centre windows of materials stretched to the photos' scale".into(),
+        _ => String::new(),
     };
     writeln!(
         out,

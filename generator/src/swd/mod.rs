@@ -49,7 +49,7 @@ use rayon::prelude::*;
 
 pub mod model;
 
-pub use model::{EvalPhase, model_swd};
+pub use model::{EvalPhase, FakeWindows, model_swd};
 
 /// Parameters of the metric. [`Default`] is the reference's configuration.
 #[derive(Debug, Clone, PartialEq)]

@@ -40,47 +40,95 @@ pub fn fake_seeds(seed: u64, count: usize) -> Vec<u64> {
     (0..count).map(|_| rng.next_u64()).collect()
 }
 
+/// How each fake is cut from the model's material.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum FakeWindows {
+    /// G's own R×R output: a fixed-size model's material, a spatial model's training window.
+    #[default]
+    Native,
+    /// The top-left R×R window of a material of this side (a spatial model): the
+    /// size-generalisation check of an any-size G. Its samples are periodic and G is
+    /// translation-equivariant, so any window is distributed like this one; each window comes
+    /// from its own material (its own z), as at side R.
+    OfSamples(usize),
+    /// A fixed-size model's unit-square material stretched to the data's texel size
+    /// (bilinear on F, R × (1/R) / texel texels) and its centre P×P window, P the data's patch
+    /// side: what a fixed-size model gives at the photos' native scale, the baseline an
+    /// any-size generator is compared with (`docs/neural-models.md`).
+    Stretched,
+}
+
 /// `count` relit samples of `model` under lights of `data`, drawn from `seed` (module docs),
-/// generated [`EVAL_BATCH`] at a time; `progress` receives the number finished so far.
-///
-/// `sample_side` (a spatial model; `None`: R) makes each fake the top-left R×R window of a
-/// material of that side: the size-generalisation check of an any-size G. Its samples are
-/// periodic and G is translation-equivariant, so any window is distributed like this one;
-/// each window comes from its own material (its own z), as at side R. Fewer samples are
-/// generated at once at larger sides so that memory stays that of one batch at R.
+/// generated [`EVAL_BATCH`] at a time and cut as `windows` says; `progress` receives the
+/// number finished so far. Fewer samples are generated at once at larger sides so that memory
+/// stays that of one batch at R.
 ///
 /// # Shapes
-/// → (count, 3, R, R), f32, encoded space.
+/// → (count, 3, P, P), f32, encoded space; P = R but for [`FakeWindows::Stretched`] (the
+/// data's patch side).
 pub fn relit_samples(
     model: &GanModel,
     data: &dyn TrainingData,
     count: usize,
     seed: u64,
-    sample_side: Option<usize>,
+    windows: FakeWindows,
     progress: &mut dyn FnMut(usize),
 ) -> Result<Tensor> {
     let r = model.config().resolution;
-    let side = sample_side.unwrap_or(r);
-    if side < r {
-        bail!("samples of side {side} are smaller than the model's {r}×{r} windows");
-    }
+    let (side, window) = match windows {
+        FakeWindows::Native => (r, r),
+        FakeWindows::OfSamples(side) if side < r => {
+            bail!("samples of side {side} are smaller than the model's {r}×{r} windows")
+        }
+        FakeWindows::OfSamples(side) => (side, r),
+        FakeWindows::Stretched => stretched_sides(model, data)?,
+    };
     let batch = (EVAL_BATCH * r * r / (side * side)).max(1);
     let seeds = fake_seeds(seed, count);
     let lights = data.fake_lights(count, seed ^ LIGHT_KEY)?;
     let mut batches = Vec::with_capacity(count.div_ceil(batch));
     let mut done = 0;
     for (seeds, lights) in seeds.chunks(batch).zip(lights.chunks(batch)) {
-        let features = model
-            .features_for_seeds_at(seeds, 1.0, side)?
-            .narrow(2, 0, r)?
-            .narrow(3, 0, r)?
-            .contiguous()?;
-        let omega = omega_for_placements(lights, r, model.device())?;
+        let features = match windows {
+            FakeWindows::Stretched => {
+                // The centre window: away from the stretched image's clamped border.
+                let offset = (side - window) / 2;
+                model
+                    .features_for_seeds(seeds, 1.0)?
+                    .upsample_bilinear2d(side, side, false)?
+                    .narrow(2, offset, window)?
+                    .narrow(3, offset, window)?
+            }
+            _ => model
+                .features_for_seeds_at(seeds, 1.0, side)?
+                .narrow(2, 0, window)?
+                .narrow(3, 0, window)?,
+        }
+        .contiguous()?;
+        let omega = omega_for_placements(lights, window, model.device())?;
         batches.push(model.relight().forward(&features, &omega)?);
         done += seeds.len();
         progress(done);
     }
     Tensor::cat(&batches, 0)
+}
+
+/// For [`FakeWindows::Stretched`]: the side a fixed-size model's unit-square material takes
+/// at the data's texel size, and the data's patch side.
+fn stretched_sides(model: &GanModel, data: &dyn TrainingData) -> Result<(usize, usize)> {
+    if model.config().spatial.is_some() {
+        bail!("stretched fakes are for fixed-size models; a spatial model samples any size");
+    }
+    let window = data.sample_texels();
+    let texel = data.sample_side() / window as f64;
+    let side = (photomat_core::flash::PLANE_SIDE / texel).round() as usize;
+    if side < window {
+        bail!(
+            "the model's material spans {side} texels at the data's texel size, less than the \
+             data's {window}×{window} patches"
+        );
+    }
+    Ok((side, window))
 }
 
 /// `count` real crops of `data` drawn from `seed`, [`EVAL_BATCH`] at a time; `progress`
@@ -115,14 +163,14 @@ pub fn model_swd(
     data: &dyn TrainingData,
     count: usize,
     seed: u64,
-    sample_side: Option<usize>,
+    windows: FakeWindows,
     config: &SwdConfig,
     progress: &mut dyn FnMut(EvalPhase, usize),
 ) -> Result<SwdReport> {
     if count == 0 {
         bail!("the SWD needs at least one image per set, got a count of 0");
     }
-    let fakes = relit_samples(model, data, count, seed, sample_side, &mut |n| {
+    let fakes = relit_samples(model, data, count, seed, windows, &mut |n| {
         progress(EvalPhase::Fakes, n)
     })?;
     let reals = real_crops(data, count, seed, model.device(), &mut |n| {

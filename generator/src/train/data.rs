@@ -55,6 +55,9 @@ pub trait TrainingData {
     /// World side of every sample this data describes (the `side` of each placement that
     /// [`TrainingData::fake_lights`] returns): where fixed lights of a preview go.
     fn sample_side(&self) -> f64;
+
+    /// Side in texels of every real image [`TrainingData::reals`] returns.
+    fn sample_texels(&self) -> usize;
 }
 
 /// The per-texel ω maps of `placements` over R×R samples, each on its own side.

@@ -37,7 +37,7 @@ use super::samples::sample_grid;
 use super::state::{CONFIG_FILE, LOG_FILE, Restored, STATE_FILE, read_config};
 use super::trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
 use crate::relight::DEFAULT_RELIGHT_LOBES;
-use crate::swd::{SwdConfig, SwdReport, model_swd};
+use crate::swd::{FakeWindows, SwdConfig, SwdReport, model_swd};
 use crate::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION, SpatialConfig};
 
 /// Default model side for a fresh run (CPU-sized).
@@ -546,7 +546,7 @@ impl GanTraining {
             data,
             count as usize,
             self.trainer.config().seed ^ SWD_SEED_KEY,
-            None,
+            FakeWindows::Native,
             &SwdConfig::default(),
             &mut |_, _| progress(GanEvent::SwdProgress),
         )
@@ -745,6 +745,9 @@ mod tests {
         }
         fn sample_side(&self) -> f64 {
             self.0
+        }
+        fn sample_texels(&self) -> usize {
+            64
         }
     }
 
