@@ -18,14 +18,20 @@ fn bundled() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/demo")
 }
 
-/// Shipping budget of the model folder's weights: "a few MB" (README.md, `models/demo/`).
-const MAX_BUNDLED_BYTES: u64 = 8 << 20;
+/// Shipping budget of the model folder's weights: about 10 MB (README.md, `models/demo/`),
+/// under the 25 MB a clone should carry for its bundled model.
+const MAX_BUNDLED_BYTES: u64 = 16 << 20;
 
-/// Mean analytic-vs-neural L1 (encoded [−1, 1] space, 5 lights, 512²) the bundled estimator
-/// must stay under. Measured at training time: 0.054 trained (models/demo/README.md), and
-/// 0.121 for an estimator after one step on an earlier bundled GAN; the bound sits between
-/// the two, so a broken or untrained model fails.
-const MAX_L1: f64 = 0.08;
+/// Mean analytic-vs-neural L1 (display values in [0, 1], 5 lights, 512²) over the texels
+/// within a photo's reach of each flash (`summary.json`: `l1_within_photo_reach`), which the
+/// bundled estimator must stay under. Over 32 seeds: 0.029 for the bundled width-½
+/// estimator, 0.040 for a width-¼ one of the same GAN, 0.112 for one after a single training
+/// step (docs/benchmarks.md, "Analytic against neural within a photo's reach"); over the 2
+/// seeds sampled here 0.029, 0.036 and 0.132.
+/// The bound sits between, so a broken or untrained model fails. (The whole-image L1 does not
+/// separate them: 0.047 and 0.054 against 0.081, most of it where M extrapolates beyond the
+/// photos' angles.)
+const MAX_L1_IN_REACH: f64 = 0.06;
 
 /// Bytes of the files under `dir`, sub-folders included.
 fn folder_bytes(dir: &Path) -> u64 {
@@ -73,8 +79,11 @@ fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
 
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.path().join("summary.json")).unwrap()).unwrap();
-    let l1 = summary["l1_mean"].as_f64().unwrap();
-    assert!(l1.is_finite() && l1 < MAX_L1, "analytic vs neural L1 {l1}");
+    let l1 = summary["l1_within_photo_reach"].as_f64().unwrap();
+    assert!(
+        l1.is_finite() && l1 < MAX_L1_IN_REACH,
+        "analytic vs neural L1 within a photo's reach {l1}"
+    );
 
     let mut folders: Vec<_> = std::fs::read_dir(out.path())
         .unwrap()
