@@ -22,9 +22,10 @@ pub const PHOTO_SIDE: f64 = 2.0;
 pub const FLASH_HEIGHT: f64 = 1.0;
 /// Smallest flash elevation cosine ω_z a texel of a whole prepared photo sees when the
 /// highlight is at the photo's centre: its corner, √2 away horizontally under the flash at
-/// height 1, gives 1/√3. The relighting MLP M learns from such photos, so texels lit more
-/// obliquely than this (a material larger than a photo under one flash) are outside what it
-/// was trained on; [`FlashGeometry::within_photo_reach`] marks the others.
+/// height 1, gives 1/√3. The relighting MLP M learns from such photos (highlights near the
+/// centre), so this angle is one every photo covers: a conservative bound of what M was
+/// trained on. Texels lit more obliquely (a material larger than a photo under one flash) are
+/// outside it; [`FlashGeometry::within_photo_reach`] marks the others.
 pub const PHOTO_REACH_MIN_COS: f64 = 0.577_350_269_189_625_8;
 /// Flash intensity: π, so that a flat white Lambertian texel straight under the flash
 /// renders exactly its albedo (π · (1/π) · cos 0 / 1²).
@@ -147,7 +148,7 @@ impl FlashGeometry {
     /// → (B, 1, R, R), the dtype of ω.
     pub fn within_photo_reach(&self) -> Result<Tensor> {
         let omega_z = self.omega.narrow(1, 2, 1)?;
-        // The corner texel itself sits at exactly 1/√3; half an f32 step below keeps it in.
+        // About one f32 ULP of margin: a texel exactly √2 away is not rounded out of reach.
         let threshold = PHOTO_REACH_MIN_COS * (1.0 - f32::EPSILON as f64);
         Ok(omega_z.ge(threshold)?.to_dtype(omega_z.dtype())?)
     }

@@ -196,7 +196,7 @@ impl TrainingData for DatasetSource {
         }
     }
 
-    fn sample_texels(&self) -> usize {
+    fn sample_side_texels(&self) -> usize {
         match self.mode {
             SourceMode::Crops { size } => size,
             SourceMode::Patches(options) => options.size,

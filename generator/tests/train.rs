@@ -224,8 +224,8 @@ impl TrainingData for Poisoned {
         self.inner.sample_side()
     }
 
-    fn sample_texels(&self) -> usize {
-        self.inner.sample_texels()
+    fn sample_side_texels(&self) -> usize {
+        self.inner.sample_side_texels()
     }
 }
 

@@ -29,7 +29,10 @@ const CHUNK: usize = 1 << 16;
 
 /// `out[i] = f(a[i], b[i])`, split over rayon tasks of [`CHUNK`] elements.
 fn zip_map<T: candle_core::WithDType>(a: &[T], b: &[T], f: impl Fn(T, T) -> T + Sync) -> Vec<T> {
-    // SAFETY: `run` writes every element of every chunk.
+    // A shorter `b` would leave the tail of `out` unwritten.
+    assert_eq!(a.len(), b.len(), "zip_map: operands of different lengths");
+    // SAFETY: `run` writes every element of every chunk (the zip covers all of `a`, and `b` is
+    // as long).
     let mut out = unsafe { output_buffer(a.len()) };
     let run = |(o, (a, b)): (&mut [T], (&[T], &[T]))| {
         for ((o, &a), &b) in o.iter_mut().zip(a).zip(b) {

@@ -57,15 +57,23 @@ pub fn keep_freed_pages() {
 /// op forgets to write fails the equivalence tests rather than reading stale memory.
 ///
 /// # Safety
-/// The caller writes every element before reading any; `T` is a plain float (`WithDType`:
-/// every bit pattern is a value, nothing to drop).
+/// The caller writes every element before reading any, and `T` is f32 or f64 (checked in
+/// debug builds): `Copy`, nothing to drop. Strictly, `Vec::set_len` asks for initialised
+/// elements and these are not until the caller writes them; this is the same contract as
+/// candle's `alloc_uninit`, kept sound in practice by no element being read before it is
+/// written (which the NaN fill of debug builds lets the equivalence tests check).
 pub(crate) unsafe fn output_buffer<T: candle_core::WithDType>(len: usize) -> Vec<T> {
+    debug_assert!(
+        matches!(T::DTYPE, candle_core::DType::F32 | candle_core::DType::F64),
+        "output_buffer is for f32 and f64 outputs, got {:?}",
+        T::DTYPE
+    );
     if cfg!(debug_assertions) {
         return vec![T::from_f64(f64::NAN); len];
     }
     let mut v = Vec::with_capacity(len);
     // SAFETY: capacity `len` was just reserved; the contract above makes the caller write the
-    // elements before they are read, and every bit pattern of `T` is a valid value.
+    // elements before any is read.
     #[allow(clippy::uninit_vec)]
     unsafe {
         v.set_len(len)

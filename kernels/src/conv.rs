@@ -458,8 +458,7 @@ pub(crate) fn forward_into<T: WithDType>(
     let maps: Vec<TapMap> = (0..g.kw).map(|kx| g.column_map(kx)).collect();
     let band = g.band_rows(size_of::<T>());
     over_batch(g.b, threads, |first, count, gemm_threads| {
-        // SAFETY: `im2col` (or, for the input gradient, a product that does not read its
-        // destination) writes the part of `col` a band uses before it is read.
+        // SAFETY: `im2col` writes the part of `col` a band uses before the product reads it.
         let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
         for i in first..first + count {
             let xi = &x[i * x_len..(i + 1) * x_len];
@@ -498,8 +497,8 @@ fn input_grad_into<T: WithDType>(g: &Geometry, dy: &[T], w: &[T], dx: &mut [T], 
     let maps: Vec<TapMap> = (0..g.kw).map(|kx| g.column_map(kx)).collect();
     let band = g.band_rows(size_of::<T>());
     over_batch(g.b, threads, |first, count, gemm_threads| {
-        // SAFETY: `im2col` (or, for the input gradient, a product that does not read its
-        // destination) writes the part of `col` a band uses before it is read.
+        // SAFETY: the product into `col[..k·n]` (not accumulating) writes the part of `col` a
+        // band uses before the scatter back into `dx` reads it.
         let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
         for i in first..first + count {
             let dyi = &dy[i * y_len..(i + 1) * y_len];
@@ -547,8 +546,7 @@ fn weight_grad_into<T: WithDType>(g: &Geometry, x: &[T], dy: &[T], dw: &mut [T],
     let band = g.band_rows(size_of::<T>());
     let partials = over_batch(g.b, threads, |first, count, gemm_threads| {
         let mut acc = vec![T::from_f64(0.0); g.co * k];
-        // SAFETY: `im2col` (or, for the input gradient, a product that does not read its
-        // destination) writes the part of `col` a band uses before it is read.
+        // SAFETY: `im2col` writes the part of `col` a band uses before the product reads it.
         let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
         for i in first..first + count {
             let xi = &x[i * x_len..(i + 1) * x_len];
@@ -612,7 +610,8 @@ enum Kind {
     WeightGrad,
 }
 
-/// Runs one of the three kernels on CPU storages, allocating its (zeroed) output.
+/// Runs one of the three kernels on CPU storages, allocating its output uninitialised
+/// (`output_buffer`): each `_into` function writes all of it.
 fn run(
     kind: Kind,
     g: &Geometry,

@@ -97,8 +97,8 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let device = Device::Cpu;
     let model = GanModel::load(&args.gan, &device)
         .with_context(|| format!("cannot load the GAN model in '{}'", args.gan.display()))?;
-    let side = model.config().resolution;
-    let (data, windows, side) = match (args.stretched_to_patches, args.sample_size) {
+    let resolution = model.config().resolution;
+    let (data, windows, window) = match (args.stretched_to_patches, args.sample_size) {
         (Some(_), _) if model.config().spatial.is_some() => anyhow::bail!(
             "--stretched-to-patches is for fixed-size models; '{}' is spatial (its samples \
              are already at the photos' scale)",
@@ -114,16 +114,17 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         }
         (None, Some(n)) => {
             let data = DatasetSource::for_model(&args.data, model.config());
-            (data, FakeWindows::OfSamples(n as usize), side)
+            let windows = FakeWindows::OfLargerSamples { side: n as usize };
+            (data, windows, resolution)
         }
         (None, None) => {
             let data = DatasetSource::for_model(&args.data, model.config());
-            (data, FakeWindows::Native, side)
+            (data, FakeWindows::Native, resolution)
         }
     };
     let data = data.with_context(|| {
         format!(
-            "cannot compare the {side}×{side} model in '{}' with the data set '{}'",
+            "cannot compare the {resolution}×{resolution} model in '{}' with the data set '{}'",
             args.gan.display(),
             args.data.display()
         )
@@ -189,7 +190,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let seconds = start.elapsed().as_secs_f64();
     print_report(
         args,
-        side,
+        (resolution, window),
         &report,
         following.as_ref(),
         probe.as_ref(),
@@ -198,10 +199,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     )
 }
 
-/// The measurement as JSON (`--json`) or as a table.
+/// The measurement as JSON (`--json`) or as a table; `resolution` is the model's side,
+/// `window` the side of the compared images.
 fn print_report(
     args: &Args,
-    side: usize,
+    (resolution, window): (usize, usize),
     report: &SwdReport,
     following: Option<&LightFollowing>,
     probe: Option<&DiscriminatorProbe>,
@@ -218,8 +220,9 @@ fn print_report(
         let value = json!({
             "gan": args.gan.display().to_string(),
             "data": args.data.display().to_string(),
-            "resolution": side,
-            "sample_size": args.sample_size.map_or(side, |n| n as usize),
+            "resolution": resolution,
+            "window": window,
+            "sample_size": args.sample_size.map_or(resolution, |n| n as usize),
             "stretched_to_patches": args.stretched_to_patches,
             "count": count,
             "seed": args.seed,
@@ -240,7 +243,7 @@ fn print_report(
     writeln!(
         out,
         "SWD ×10³ between {count} relit samples of '{}' and {count} crops of '{}' \
-         ({side}×{side}{cut}, seed {}; lower is closer):",
+         ({window}×{window}{cut}, seed {}; lower is closer):",
         args.gan.display(),
         args.data.display(),
         args.seed

@@ -192,7 +192,10 @@ fn report(
         }
     )?;
     // Larger than a photo, a material has texels M never saw lit that obliquely.
-    let in_reach = if (summary.l1_within_photo_reach - summary.l1_mean).abs() > 1e-9 {
+    // Relative 1e-6: above the f32 rounding of the two sums, which agree when every texel is
+    // within reach.
+    let gap = (summary.l1_within_photo_reach - summary.l1_mean).abs();
+    let in_reach = if gap > 1e-6 * summary.l1_mean.abs().max(f64::MIN_POSITIVE) {
         format!(
             " ({:.4} within a photo's reach of the flash)",
             summary.l1_within_photo_reach

@@ -60,8 +60,9 @@ pub struct MaterialSummary {
     pub l1_mean: f64,
     /// The same L1 over the texels within a photo's reach of the flash
     /// (`FlashGeometry::within_photo_reach`): where M relights under geometry it was trained
-    /// on. Equal to [`Self::l1_per_light`] for a material no larger than a photo; NaN (JSON
-    /// null) for a light that reaches none of the material's texels.
+    /// on. Equal to [`Self::l1_per_light`] (to rounding) when every texel is within √2 of each
+    /// flash, as on a unit-square material under the reference lights; NaN (JSON null) for a
+    /// light that reaches none of the material's texels.
     pub l1_within_photo_reach_per_light: Vec<f64>,
     /// Mean of the finite values of [`Self::l1_within_photo_reach_per_light`].
     pub l1_within_photo_reach: f64,

@@ -50,7 +50,10 @@ pub enum FakeWindows {
     /// size-generalisation check of an any-size G. Its samples are periodic and G is
     /// translation-equivariant, so any window is distributed like this one; each window comes
     /// from its own material (its own z), as at side R.
-    OfSamples(usize),
+    OfLargerSamples {
+        /// Side of each material, texels (≥ R).
+        side: usize,
+    },
     /// A fixed-size model's unit-square material stretched to the data's texel size
     /// (bilinear on F, R × (1/R) / texel texels) and its centre P×P window, P the data's patch
     /// side: what a fixed-size model gives at the photos' native scale, the baseline an
@@ -77,10 +80,10 @@ pub fn relit_samples(
     let r = model.config().resolution;
     let (side, window) = match windows {
         FakeWindows::Native => (r, r),
-        FakeWindows::OfSamples(side) if side < r => {
+        FakeWindows::OfLargerSamples { side } if side < r => {
             bail!("samples of side {side} are smaller than the model's {r}×{r} windows")
         }
-        FakeWindows::OfSamples(side) => (side, r),
+        FakeWindows::OfLargerSamples { side } => (side, r),
         FakeWindows::Stretched => stretched_sides(model, data)?,
     };
     let batch = (EVAL_BATCH * r * r / (side * side)).max(1);
@@ -119,7 +122,7 @@ fn stretched_sides(model: &GanModel, data: &dyn TrainingData) -> Result<(usize, 
     if model.config().spatial.is_some() {
         bail!("stretched fakes are for fixed-size models; a spatial model samples any size");
     }
-    let window = data.sample_texels();
+    let window = data.sample_side_texels();
     let texel = data.sample_side() / window as f64;
     let side = (photomat_core::flash::PLANE_SIDE / texel).round() as usize;
     if side < window {

@@ -57,7 +57,7 @@ pub trait TrainingData {
     fn sample_side(&self) -> f64;
 
     /// Side in texels of every real image [`TrainingData::reals`] returns.
-    fn sample_texels(&self) -> usize;
+    fn sample_side_texels(&self) -> usize;
 }
 
 /// The per-texel ω maps of `placements` over R×R samples, each on its own side.

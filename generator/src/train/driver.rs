@@ -746,7 +746,7 @@ mod tests {
         fn sample_side(&self) -> f64 {
             self.0
         }
-        fn sample_texels(&self) -> usize {
+        fn sample_side_texels(&self) -> usize {
             64
         }
     }
