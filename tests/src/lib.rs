@@ -36,6 +36,18 @@ pub fn model(spec: &str) -> Brdf {
     lookup(spec).unwrap_or_else(|e| panic!("{e}"))
 }
 
+/// Mean |a − b| over every element, in f64 (the two tensors of one shape, any float dtype);
+/// panics on a tensor error (tests only).
+pub fn mean_abs_difference(a: &Tensor, b: &Tensor) -> f64 {
+    let gap = || -> candle_core::Result<f64> {
+        (a.to_dtype(DType::F64)? - b.to_dtype(DType::F64)?)?
+            .abs()?
+            .mean_all()?
+            .to_scalar::<f64>()
+    };
+    gap().unwrap_or_else(|e| panic!("{e}"))
+}
+
 /// Panic with the library's message (tests only).
 fn ok<T>(r: photomat_core::Result<T>) -> T {
     r.unwrap_or_else(|e| panic!("{e}"))

@@ -12,6 +12,7 @@ use candle_core::{Device, IndexOp};
 use photomat_core::map_files::load_maps;
 use photomat_estimator::EstimatorModel;
 use photomat_generator::GanModel;
+use photomat_tests::mean_abs_difference;
 
 /// The bundled model folder (the default of `photomat sample --model`).
 fn bundled() -> PathBuf {
@@ -109,22 +110,14 @@ fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
         for (name, map) in loaded.maps.iter() {
             let t = map.to_dtype(candle_core::DType::F64).unwrap();
             let w = t.dim(3).unwrap();
-            let seam = (t.i((.., .., .., 0)).unwrap() - t.i((.., .., .., w - 1)).unwrap())
-                .unwrap()
-                .abs()
-                .unwrap()
-                .mean_all()
-                .unwrap()
-                .to_scalar::<f64>()
-                .unwrap();
-            let inner = (t.narrow(3, 1, w - 1).unwrap() - t.narrow(3, 0, w - 1).unwrap())
-                .unwrap()
-                .abs()
-                .unwrap()
-                .mean_all()
-                .unwrap()
-                .to_scalar::<f64>()
-                .unwrap();
+            let seam = mean_abs_difference(
+                &t.i((.., .., .., 0)).unwrap(),
+                &t.i((.., .., .., w - 1)).unwrap(),
+            );
+            let inner = mean_abs_difference(
+                &t.narrow(3, 1, w - 1).unwrap(),
+                &t.narrow(3, 0, w - 1).unwrap(),
+            );
             assert!(
                 seam <= 3.0 * inner + 1e-6,
                 "{}: {name} seam step {seam} vs interior {inner}",

@@ -9,6 +9,7 @@ use photomat_tests as _;
 use photomat_tests::cli_fixtures::{
     path_str, photomat, photomat_error, simulated_dataset, tiny_gan,
 };
+use photomat_tests::mean_abs_difference;
 use serde_json::Value;
 
 fn eval_json(gan: &str, data: &str, seed: &str) -> Value {
@@ -237,14 +238,10 @@ fn stretched_fakes_are_the_fixed_model_at_the_photos_texel_size() {
     assert_eq!(twice.dims(), [3, 3, 32, 32]);
     let step = |t: &candle_core::Tensor| {
         let w = t.dim(3).unwrap();
-        (t.narrow(3, 1, w - 1).unwrap() - t.narrow(3, 0, w - 1).unwrap())
-            .unwrap()
-            .abs()
-            .unwrap()
-            .mean_all()
-            .unwrap()
-            .to_scalar::<f32>()
-            .unwrap()
+        mean_abs_difference(
+            &t.narrow(3, 1, w - 1).unwrap(),
+            &t.narrow(3, 0, w - 1).unwrap(),
+        )
     };
     let (stretched_step, native_step) = (step(&twice), step(&fakes(&finer, FakeWindows::Native)));
     assert!(
