@@ -92,10 +92,12 @@ impl CircularConv2d {
     }
 }
 
-impl Module for CircularConv2d {
+impl CircularConv2d {
+    /// The convolution without its bias.
+    ///
     /// # Shapes
     /// (B, C_in, H, W) → (B, C_out, H/s, W/s); H and W must be multiples of the stride s.
-    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+    fn convolve(&self, x: &Tensor) -> Result<Tensor> {
         let (_b, _c, h, w) = x.dims4()?;
         if h % self.stride != 0 || w % self.stride != 0 {
             bail!(
@@ -103,8 +105,34 @@ impl Module for CircularConv2d {
                 self.stride
             );
         }
-        let spec = Conv2dSpec::circular(self.stride, self.pad);
-        let y = conv2d(x, self.conv.weight(), spec)?;
+        conv2d(
+            x,
+            self.conv.weight(),
+            Conv2dSpec::circular(self.stride, self.pad),
+        )
+    }
+
+    /// `LeakyReLU(conv(x) + bias, slope)`, the bias and the activation as one fused pass each
+    /// way ([`photomat_kernels::bias_leaky_relu_gain`]): the same value as
+    /// `leaky_relu(&self.forward(x)?, slope)` without the broadcast addition, whose backward
+    /// sums the gradient over the batch and the texels in a slow strided reduction.
+    ///
+    /// # Shapes
+    /// As [`Module::forward`].
+    pub fn forward_leaky_relu(&self, x: &Tensor, slope: f64) -> Result<Tensor> {
+        let y = self.convolve(x)?;
+        match self.conv.bias() {
+            Some(bias) => photomat_kernels::bias_leaky_relu_gain(&y, bias, slope, 1.0),
+            None => photomat_kernels::leaky_relu(&y, slope),
+        }
+    }
+}
+
+impl Module for CircularConv2d {
+    /// # Shapes
+    /// (B, C_in, H, W) → (B, C_out, H/s, W/s); H and W must be multiples of the stride s.
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let y = self.convolve(x)?;
         match self.conv.bias() {
             Some(bias) => y.broadcast_add(&bias.reshape((1, (), 1, 1))?),
             None => Ok(y),
@@ -221,6 +249,33 @@ mod tests {
                 );
                 assert!(max_abs_diff(a, b)? < 1e-10, "k{k} s{s}");
             }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn fused_leaky_relu_forward_equals_the_layer_then_the_activation() -> Result<()> {
+        let vm = VarMap::new();
+        let conv = circular_conv2d(
+            3,
+            4,
+            3,
+            1,
+            VarBuilder::from_varmap(&vm, DType::F64, &Device::Cpu),
+        )?;
+        let x = pseudo_random((2, 3, 6, 8), 7, DType::F64, &Device::Cpu)?;
+        let g = pseudo_random((2, 4, 6, 8), 8, DType::F64, &Device::Cpu)?;
+        let fused = conv.forward_leaky_relu(&x, 0.01)?;
+        let separate = crate::leaky_relu(&conv.forward(&x)?, 0.01)?;
+        // The same sums in the same order, the bias added once: rounding-level differences.
+        assert!(max_abs_diff(&fused, &separate)? < 1e-12);
+        let a = (fused * &g)?.sum_all()?.backward()?;
+        let b = (separate * &g)?.sum_all()?.backward()?;
+        let bias = conv.conv().bias().expect("layer has a bias");
+        for t in [conv.conv().weight(), bias] {
+            let (a, b) = (a.get(t).expect("gradient"), b.get(t).expect("gradient"));
+            // f64 sums of ≤ 96 products of O(1) values in another order.
+            assert!(max_abs_diff(a, b)? < 1e-10);
         }
         Ok(())
     }

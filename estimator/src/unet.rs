@@ -57,7 +57,6 @@ use candle_core::{Module, Result, Tensor, bail};
 use candle_nn::VarBuilder;
 use photomat_core::{DifferentiableBrdf, MaterialMaps};
 
-use crate::activation::leaky_relu;
 use crate::conv::{CircularConv2d, circular_conv2d};
 use crate::upsample::upsample2x_periodic;
 
@@ -232,8 +231,8 @@ impl EncoderLevel {
 
     /// (B, C_in, H, W) → (B, C_out, H/2, W/2).
     fn forward(&self, x: &Tensor, slope: f64) -> Result<Tensor> {
-        let x = leaky_relu(&self.down.forward(x)?, slope)?;
-        leaky_relu(&self.conv.forward(&x)?, slope)
+        let x = self.down.forward_leaky_relu(x, slope)?;
+        self.conv.forward_leaky_relu(&x, slope)
     }
 }
 
@@ -256,8 +255,8 @@ impl DecoderLevel {
     /// comes first in the concatenation, as in the reference.
     fn forward(&self, x: &Tensor, skip: &Tensor, slope: f64) -> Result<Tensor> {
         let x = Tensor::cat(&[&upsample2x_periodic(x)?, skip], 1)?;
-        let x = leaky_relu(&self.conv1.forward(&x)?, slope)?;
-        leaky_relu(&self.conv2.forward(&x)?, slope)
+        let x = self.conv1.forward_leaky_relu(&x, slope)?;
+        self.conv2.forward_leaky_relu(&x, slope)
     }
 }
 
