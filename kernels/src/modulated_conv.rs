@@ -13,7 +13,8 @@
 //! passes over the full feature map (two products, a broadcast sum, and a zero-filled gradient
 //! buffer plus an addition per operand); here the forward scales the input once, runs the
 //! im2col + gemm convolution of [`crate::conv`] and scales its output rows in place, and the
-//! backward is seven passes:
+//! backward is seven passes, the element-wise ones the fused per-plane ops of
+//! [`crate::plane_ops`]:
 //!
 //! ```text
 //! g' = d ⊙ dy,  gx = Gx(g', W)           (the convolution's input gradient)
@@ -27,12 +28,13 @@
 //! [`crate::reference::with_reference_ops`], use [`modulated_conv2d_reference`].
 
 use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor, WithDType, bail};
-use rayon::prelude::*;
 
+use crate::alloc::output_buffer;
 use crate::conv::{
     Conv2dSpec, Geometry, apply_input_grad, apply_weight_grad, contiguous, conv2d_reference,
     expect_shape, fast_path, forward_into,
 };
+use crate::plane_ops::{plane_dot, scale_planes, scale_planes_in_place};
 
 /// `d ⊙ conv(s ⊙ x, W)` with `scales` = `s ‖ d` (B, C_in + C_out) when `demodulate`, `s`
 /// alone (B, C_in) otherwise; stride, padding and padding mode from `spec`.
@@ -95,26 +97,6 @@ struct ModulatedConv {
 }
 
 impl ModulatedConv {
-    /// Scales `planes` (rows of `plane` elements, `channels` per image) by `scales[image ·
-    /// stride + offset + channel]`, in place, split over rayon for large maps.
-    fn scale_planes<T: WithDType>(
-        planes: &mut [T],
-        plane: usize,
-        channels: usize,
-        scales: &[T],
-        (stride, offset): (usize, usize),
-    ) {
-        let f = |(i, p): (usize, &mut [T])| {
-            let s = scales[(i / channels) * stride + offset + i % channels];
-            p.iter_mut().for_each(|v| *v *= s);
-        };
-        if planes.len() < 1 << 16 {
-            planes.chunks_mut(plane).enumerate().for_each(f);
-        } else {
-            planes.par_chunks_mut(plane).enumerate().for_each(f);
-        }
-    }
-
     fn run<T: WithDType>(&self, x: &[T], w: &[T], scales: &[T]) -> Vec<T> {
         let g = &self.g;
         let x_shape = g.x_shape();
@@ -127,11 +109,12 @@ impl ModulatedConv {
         };
         let stride = if self.demodulate { ci + co } else { *ci };
         let mut xs = x.to_vec();
-        Self::scale_planes(&mut xs, h * wd, *ci, scales, (stride, 0));
-        let mut y = vec![T::from_f64(0.0); y_shape.elem_count()];
+        scale_planes_in_place(&mut xs, h * wd, |i| scales[(i / ci) * stride + i % ci]);
+        // SAFETY: `forward_into` writes every element of `y`.
+        let mut y = unsafe { output_buffer(y_shape.elem_count()) };
         forward_into(g, &xs, w, &mut y, crate::alloc::thread_count());
         if self.demodulate {
-            Self::scale_planes(&mut y, ho * wo, *co, scales, (stride, *ci));
+            scale_planes_in_place(&mut y, ho * wo, |i| scales[(i / co) * stride + ci + i % co]);
         }
         y
     }
@@ -176,25 +159,21 @@ impl CustomOp3 for ModulatedConv {
         y: &Tensor,
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>, Option<Tensor>)> {
-        let (b, ci, h, wd) = x.dims4()?;
-        let (_, co, ho, wo) = y.dims4()?;
+        let ci = x.dim(1)?;
+        let co = y.dim(1)?;
         let s = scales.narrow(1, 0, ci)?;
-        let s4 = s.reshape((b, ci, 1, 1))?;
         let (gd, d) = if self.demodulate {
             let d = scales.narrow(1, ci, co)?;
-            (grad.broadcast_mul(&d.reshape((b, co, 1, 1))?)?, Some(d))
+            (scale_planes(grad, &d)?, Some(d))
         } else {
             (grad.clone(), None)
         };
         let gx = apply_input_grad(self.g, &gd, w)?;
-        let dx = gx.broadcast_mul(&s4)?;
-        let ds = (&gx * x)?.reshape((b, ci, h * wd))?.sum(2)?;
-        let dw = apply_weight_grad(self.g, &x.broadcast_mul(&s4)?, &gd)?;
+        let dx = scale_planes(&gx, &s)?;
+        let ds = plane_dot(&gx, x)?;
+        let dw = apply_weight_grad(self.g, &scale_planes(x, &s)?, &gd)?;
         let dscales = match d {
-            Some(d) => {
-                let dd = (grad * y)?.reshape((b, co, ho * wo))?.sum(2)?.div(&d)?;
-                Tensor::cat(&[ds, dd], 1)?
-            }
+            Some(d) => Tensor::cat(&[ds, plane_dot(grad, y)?.div(&d)?], 1)?,
             None => ds,
         };
         Ok((Some(dx), Some(dw), Some(dscales)))
