@@ -15,6 +15,8 @@
 //!   (StyleGAN2's `upfirdn2d` with the `[1, 3, 3, 1]` filter), differentiable to any order.
 //! - [`modulated_conv2d`]: StyleGAN2's modulated convolution (input styles, shared-weight
 //!   conv, output demodulation) as one op with a seven-pass backward ([`modulated_conv`]).
+//! - [`periodic_window`]: a window of each sample's periodic extension (a tileable output
+//!   rolled and cut), one gather forward and one scatter-add backward ([`periodic_window`]).
 //! - [`scale_planes`], [`plane_dot`]: per-plane scaling and per-plane dot products, each the
 //!   other's adjoint, one pass each ([`plane_ops`]).
 //! - [`noise_bias_leaky_relu_gain`]: a synthesis layer's epilogue (noise, bias, LeakyReLU ×
@@ -39,6 +41,7 @@ pub mod fir;
 pub mod mlp;
 pub mod modulated_conv;
 pub mod noise_act;
+pub mod periodic_window;
 pub mod plane_ops;
 pub mod reference;
 pub mod testing;
@@ -55,5 +58,6 @@ pub use mlp::{
 };
 pub use modulated_conv::{modulated_conv2d, modulated_conv2d_reference};
 pub use noise_act::noise_bias_leaky_relu_gain;
+pub use periodic_window::{periodic_window, periodic_window_reference};
 pub use plane_ops::{plane_dot, scale_planes};
 pub use reference::{reference_ops, with_reference_ops};

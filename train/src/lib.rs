@@ -24,4 +24,4 @@ pub mod varmap;
 
 pub use adam::{Adam, AdamConfig};
 pub use nan_guard::{NanGuard, gradients_finite};
-pub use roll::{roll_maps, roll_offsets, roll_per_sample};
+pub use roll::{roll_maps, roll_offsets, roll_per_sample, window_per_sample};

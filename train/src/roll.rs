@@ -35,16 +35,33 @@ pub fn roll_offsets(seeds: &[u64], size: usize) -> Vec<(usize, usize)> {
 /// # Shapes
 /// (B, C, H, W) with B = `offsets.len()` → (B, C, H, W).
 pub fn roll_per_sample(x: &Tensor, offsets: &[(usize, usize)]) -> Result<Tensor> {
-    let (b, _c, _h, _w) = x.dims4()?;
+    let (_, _, h, w) = x.dims4()?;
+    window_per_sample(x, offsets, (h, w))
+}
+
+/// The top-left `(h', w')` window of [`roll_per_sample`]`(x, offsets)`, taken from the
+/// periodic extension when the window is larger than the map, as one fused op
+/// ([`photomat_kernels::periodic_window`]: one pass each way where the roll and the cut
+/// compose a dozen copies). Differentiable to any order.
+///
+/// # Shapes
+/// (B, C, H, W) with B = `offsets.len()`, every Δrow < H and Δcol < W → (B, C, h', w').
+pub fn window_per_sample(
+    x: &Tensor,
+    offsets: &[(usize, usize)],
+    window: (usize, usize),
+) -> Result<Tensor> {
+    let (b, _c, h, w) = x.dims4()?;
     if offsets.len() != b {
         bail!("roll: {} offsets for a batch of {b}", offsets.len());
     }
-    let parts = offsets
+    // Output texel (i, j) reads input texel ((i − Δrow) mod H, (j − Δcol) mod W): the window
+    // starts at ((H − Δrow) mod H, (W − Δcol) mod W).
+    let origins: Vec<(usize, usize)> = offsets
         .iter()
-        .enumerate()
-        .map(|(i, &(dr, dc))| x.narrow(0, i, 1)?.roll(dr as i32, 2)?.roll(dc as i32, 3))
-        .collect::<Result<Vec<_>>>()?;
-    Tensor::cat(&parts, 0)
+        .map(|&(dr, dc)| ((h - dr % h) % h, (w - dc % w) % w))
+        .collect();
+    photomat_kernels::periodic_window(x, &origins, window)
 }
 
 /// [`roll_per_sample`] on every map, by the same offsets.
@@ -107,6 +124,19 @@ mod tests {
         let values = |t: &Tensor| t.flatten_all()?.to_vec1::<f32>();
         assert_eq!(values(rolled.get("roughness")?)?, values(&direct)?);
         assert_eq!(values(rolled.get("height")?)?, values(&(&direct * 2.0)?)?);
+        Ok(())
+    }
+
+    #[test]
+    fn window_is_the_top_left_of_the_roll() -> Result<()> {
+        let x = Tensor::arange(0f64, 2.0 * 3.0 * 6.0 * 7.0, &Device::Cpu)?.reshape((2, 3, 6, 7))?;
+        let offsets = [(5, 1), (0, 6)];
+        let rolled = roll_per_sample(&x, &offsets)?;
+        let window = window_per_sample(&x, &offsets, (4, 5))?;
+        let expected = rolled.narrow(2, 0, 4)?.narrow(3, 0, 5)?;
+        // Copies of the same values: exactly equal.
+        let diff = (window - expected)?.abs()?.max_all()?.to_scalar::<f64>()?;
+        assert_eq!(diff, 0.0);
         Ok(())
     }
 }

@@ -43,7 +43,9 @@ use candle_core::{DType, Device, Result, Tensor, Var};
 use candle_nn::VarMap;
 use photomat_core::rng::SplitMix64;
 use photomat_train::varmap::{insert_renamed, insert_var};
-use photomat_train::{Adam, NanGuard, gradients_finite, roll_offsets, roll_per_sample};
+use photomat_train::{
+    Adam, NanGuard, gradients_finite, roll_offsets, roll_per_sample, window_per_sample,
+};
 
 use super::config::TrainConfig;
 use super::data::{TrainingData, omega_for_placements};
@@ -402,10 +404,7 @@ impl Trainer {
                     g.synthesis()
                         .forward_field(&fields, &ws, &NoiseInput::Given(&noise_images))?;
                 let offsets = roll_offsets(&stream_seeds(seed, step, roll, b), side);
-                roll_per_sample(&features, &offsets)?
-                    .narrow(2, 0, cfg.resolution)?
-                    .narrow(3, 0, cfg.resolution)?
-                    .contiguous()?
+                window_per_sample(&features, &offsets, (cfg.resolution, cfg.resolution))?
             }
         };
         let placements = data.fake_lights(b, stream_seed(seed, step, lights, 0))?;
