@@ -134,7 +134,7 @@ impl Module for CircularConv2d {
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
         let y = self.convolve(x)?;
         match self.conv.bias() {
-            Some(bias) => y.broadcast_add(&bias.reshape((1, (), 1, 1))?),
+            Some(bias) => photomat_kernels::add_channel_bias(&y, bias),
             None => Ok(y),
         }
     }

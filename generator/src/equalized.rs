@@ -213,7 +213,7 @@ impl EqualizedConv2d {
     /// (B, out, H, W) → (B, out, H, W).
     pub fn add_bias(&self, y: &Tensor) -> Result<Tensor> {
         match &self.bias {
-            Some(b) => y.broadcast_add(&b.reshape((1, (), 1, 1))?),
+            Some(b) => photomat_kernels::add_channel_bias(y, b),
             None => Ok(y.clone()),
         }
     }

@@ -140,9 +140,7 @@ impl ToFeatures {
     /// # Shapes
     /// x (B, C_in, H, W), w (B, w_dim) → (B, feature_channels, H, W).
     pub fn forward(&self, x: &Tensor, w: &Tensor) -> Result<Tensor> {
-        self.conv
-            .forward(x, w)?
-            .broadcast_add(&self.bias.reshape((1, (), 1, 1))?)
+        photomat_kernels::add_channel_bias(&self.conv.forward(x, w)?, &self.bias)
     }
 }
 

@@ -11,6 +11,9 @@
 //!   `conv2d` instead of candle's slow direct-loop `conv_transpose2d` ([`conv_grad`]).
 //! - [`leaky_relu`], [`leaky_relu_gain`], [`bias_leaky_relu_gain`]: (bias +) LeakyReLU (× gain)
 //!   as one fused element-wise pass each way, differentiable to any order ([`activation`]).
+//! - [`add_channel_bias`], [`channel_sums`]: a per-channel bias with no activation after it,
+//!   whose backward sums each plane contiguously instead of candle's strided reduction
+//!   ([`bias`]).
 //! - [`fir`]: separable FIR filtering/resampling, one sparse constant matrix per axis
 //!   (StyleGAN2's `upfirdn2d` with the `[1, 3, 3, 1]` filter), differentiable to any order.
 //! - [`modulated_conv2d`]: StyleGAN2's modulated convolution (input styles, shared-weight
@@ -34,6 +37,7 @@
 
 pub mod activation;
 pub mod alloc;
+pub mod bias;
 pub mod circular_pad;
 pub mod conv;
 pub mod conv_grad;
@@ -48,6 +52,7 @@ pub mod testing;
 pub mod threads;
 
 pub use activation::{bias_leaky_relu_gain, leaky_relu, leaky_relu_gain};
+pub use bias::{add_channel_bias, channel_sums};
 pub use circular_pad::{circular_pad, circular_pad_dim, circular_pad2d};
 pub use conv::{Conv2dSpec, PaddingMode, conv2d, conv2d_reference};
 pub use conv_grad::conv2d_fast_backward;
