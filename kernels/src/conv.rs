@@ -35,11 +35,12 @@ use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
 
-/// Target size of one band of `col(x)`: small enough to stay in the last-level cache (32 MiB
-/// shared on the build machine, 1 MiB L2 per core) while `gemm` packs it, large enough that
-/// `gemm` sees ≥ a few hundred columns (≈ 900 for a 3×3 64-channel f32 layer). Chosen from
-/// these cache sizes, not tuned by measurement yet.
-pub const COL_TILE_BYTES: usize = 2 << 20;
+/// Target size of one band of `col(x)`: half a core's L2 (1 MiB on the build machine), so that
+/// the band is still in L2 when `gemm` packs it, while `gemm` still sees ≥ a few hundred
+/// columns (≈ 220 for a 3×3 64-channel f32 layer). Measured against 256 KiB … 8 MiB on the
+/// bench's steps and convs (`docs/benchmarks.md`, "The band of `col(x)` sized to L2"): the
+/// 2 MiB chosen before from the cache sizes alone was 2–19 % slower.
+pub const COL_TILE_BYTES: usize = 512 << 10;
 
 /// How the border of the input is extended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -730,7 +730,9 @@ impl Forward {
             )
         };
         let hidden = if self.save {
-            let mut hidden = vec![T::zero(); io.rows() * per_row];
+            // SAFETY: `block_forward` writes every hidden layer's slot for each block's rows
+            // (slot i for layer i, `ns` = l − 1 slots), and the blocks cover all rows.
+            let mut hidden = unsafe { output_buffer(io.rows() * per_row) };
             let items: Vec<_> = blocks
                 .iter()
                 .copied()
@@ -1022,7 +1024,9 @@ impl Backward {
             t
         };
         let mut dz_all = if self.save_dz {
-            vec![T::zero(); io.rows() * per_row]
+            // SAFETY: `block_backward` writes dz of layers l − 1 … 1 into slots l − 2 … 0 for
+            // each block's rows, and the blocks cover all rows.
+            unsafe { output_buffer(io.rows() * per_row) }
         } else {
             Vec::new()
         };
