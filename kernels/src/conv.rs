@@ -446,6 +446,12 @@ fn over_batch<R: Send>(
 }
 
 /// Forward: writes every element of `y` (B·C_out·H_out·W_out).
+///
+/// Bands of output rows write disjoint parts of `y`, so when the batch is smaller than the
+/// thread count (sampling one material, E at full resolution) and there are enough bands, the
+/// (image, band) pairs are the parallel tasks, each with single-threaded `gemm`: gemm's own
+/// threading splits each band's small product and scales poorly (`docs/benchmarks.md`,
+/// "Bands as the parallel tasks of a one-image conv").
 pub(crate) fn forward_into<T: WithDType>(
     g: &Geometry,
     x: &[T],
@@ -458,33 +464,50 @@ pub(crate) fn forward_into<T: WithDType>(
     let y_addr = y.as_mut_ptr() as usize;
     let maps: Vec<TapMap> = (0..g.kw).map(|kx| g.column_map(kx)).collect();
     let band = g.band_rows(size_of::<T>());
+    let col_len = if g.is_pointwise() { 0 } else { k * band * g.wo };
+    // Output rows r0..r0 + band of image i; `col` holds at least one band.
+    let run_band = |i: usize, r0: usize, col: &mut [T], gemm_threads: usize| {
+        let xi = &x[i * x_len..(i + 1) * x_len];
+        // SAFETY: each call writes rows r0..r1 of every output channel of image i, and no two
+        // calls running at the same time share an (image, band) pair; `y` outlives the calls.
+        let yi =
+            unsafe { std::slice::from_raw_parts_mut((y_addr as *mut T).add(i * y_len), y_len) };
+        let r1 = (r0 + band).min(g.ho);
+        let n = (r1 - r0) * g.wo;
+        let rhs = if g.is_pointwise() {
+            Mat::new(&xi[r0 * g.wo..], n_out, 1)
+        } else {
+            im2col(g, &maps, xi, (r0, r1), &mut col[..k * n]);
+            Mat::new(&col[..k * n], n, 1)
+        };
+        matmul(
+            (g.co, n, k),
+            &mut yi[r0 * g.wo..],
+            n_out,
+            false,
+            Mat::new(w, k, 1),
+            rhs,
+            gemm_threads,
+        );
+    };
+    let bands = g.ho.div_ceil(band);
+    if threads > 1 && g.b < threads && g.b * bands >= 2 * threads {
+        let jobs: Vec<(usize, usize)> = (0..g.b)
+            .flat_map(|i| (0..bands).map(move |j| (i, j * band)))
+            .collect();
+        jobs.into_par_iter().for_each_init(
+            // SAFETY: `im2col` writes the part of `col` a band uses before the product reads it.
+            || unsafe { output_buffer::<T>(col_len) },
+            |col, (i, r0)| run_band(i, r0, col, 1),
+        );
+        return;
+    }
     over_batch(g.b, threads, |first, count, gemm_threads| {
         // SAFETY: `im2col` writes the part of `col` a band uses before the product reads it.
-        let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
+        let mut col = unsafe { output_buffer(col_len) };
         for i in first..first + count {
-            let xi = &x[i * x_len..(i + 1) * x_len];
-            // SAFETY: tasks own disjoint image ranges `first..first + count`, so the output
-            // slices of different tasks do not overlap; `y` outlives `over_batch`.
-            let yi =
-                unsafe { std::slice::from_raw_parts_mut((y_addr as *mut T).add(i * y_len), y_len) };
             for r0 in (0..g.ho).step_by(band) {
-                let r1 = (r0 + band).min(g.ho);
-                let n = (r1 - r0) * g.wo;
-                let rhs = if g.is_pointwise() {
-                    Mat::new(&xi[r0 * g.wo..], n_out, 1)
-                } else {
-                    im2col(g, &maps, xi, (r0, r1), &mut col[..k * n]);
-                    Mat::new(&col[..k * n], n, 1)
-                };
-                matmul(
-                    (g.co, n, k),
-                    &mut yi[r0 * g.wo..],
-                    n_out,
-                    false,
-                    Mat::new(w, k, 1),
-                    rhs,
-                    gemm_threads,
-                );
+                run_band(i, r0, &mut col, gemm_threads);
             }
         }
     });
@@ -967,9 +990,18 @@ mod tests {
         let spec = Conv2dSpec::circular(1, 1);
         let g = Geometry::new(x.dims4()?, w.dims4()?, spec)?;
         assert_eq!(g.band_rows(8), 3);
+        let reference = conv2d_reference(&x, &w, spec)?;
         let y = conv2d(&x, &w, spec)?;
         // 576-term f64 dot products of O(1) values: rounding ≲ 1e-13.
-        assert!(max_abs_diff(&y, &conv2d_reference(&x, &w, spec)?)? < 1e-10);
+        assert!(max_abs_diff(&y, &reference)? < 1e-10);
+        // One image, six bands: with 2 or 3 threads the bands are the parallel tasks.
+        let (xv, wv) = (x.flatten_all()?.to_vec1()?, w.flatten_all()?.to_vec1()?);
+        for threads in [1, 2, 3] {
+            let mut y = vec![f64::NAN; g.y_shape().elem_count()];
+            forward_into(&g, &xv, &wv, &mut y, threads);
+            let y = Tensor::from_vec(y, g.y_shape(), &dev)?;
+            assert!(max_abs_diff(&y, &reference)? < 1e-10, "threads {threads}");
+        }
         Ok(())
     }
 
