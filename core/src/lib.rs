@@ -41,6 +41,7 @@ pub mod shading;
 pub mod sheet;
 pub mod simplify;
 pub mod testing;
+pub mod texel_ops;
 pub mod vecops;
 
 pub use adapter::{AdaptedBrdf, MapAdapter};

@@ -19,11 +19,12 @@ use crate::microfacet::{
     smith_correlated_over_4cos, smith_g1, smith_g1_over_cos,
 };
 use crate::shading::ShadingGeometry;
+use crate::texel_ops::scale_texels;
 
 /// Lambert: `ρ/π · cos θ_o`.
 pub fn lambert(geometry: &ShadingGeometry, albedo: &Tensor) -> Result<Tensor> {
     let weight = (geometry.cos_o.broadcast_mul(&geometry.mask)? / PI)?;
-    Ok(albedo.broadcast_mul(&weight)?)
+    scale_texels(albedo, &weight)
 }
 
 /// A GGX lobe with any Fresnel term: `fresnel · D·G1(o)·(G1(i)/cos θ_i) / 4`, masked.
@@ -55,7 +56,7 @@ pub fn ggx_lobe_masked(
         Masking::Implicit => (&geometry.cos_o * 0.25)?,
     };
     let scalar = d.broadcast_mul(&shadowing)?.broadcast_mul(&geometry.mask)?;
-    Ok(fresnel.broadcast_mul(&scalar)?)
+    scale_texels(fresnel, &scalar)
 }
 
 /// GGX specular with Schlick Fresnel (`f0` = specular albedo) and `α = max(roughness², 1e-4)`.
@@ -98,5 +99,5 @@ pub fn blinn_phong_specular(
     let scalar = d
         .broadcast_mul(&(&geometry.cos_o * 0.25)?)?
         .broadcast_mul(&geometry.mask)?;
-    Ok(f0.broadcast_mul(&scalar)?)
+    scale_texels(f0, &scalar)
 }

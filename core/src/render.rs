@@ -11,6 +11,7 @@ use candle_core::Tensor;
 use crate::brdf::DifferentiableBrdf;
 use crate::flash::{FLASH_INTENSITY, FlashGeometry, Highlight};
 use crate::maps::MaterialMaps;
+use crate::texel_ops::scale_texels;
 use crate::{Error, Result};
 
 /// Lower clamp before the 1/2.2 power: the slope of `x^(1/2.2)` is infinite at 0, at 1e-6 it
@@ -74,7 +75,7 @@ pub fn render_radiance_with(
     }
     let omega = &geometry.omega;
     let f_cos = brdf.eval(omega, omega, maps)?;
-    Ok((f_cos.broadcast_mul(&geometry.inv_dist2)? * FLASH_INTENSITY)?)
+    Ok((scale_texels(&f_cos, &geometry.inv_dist2)? * FLASH_INTENSITY)?)
 }
 
 /// Display-encoded render in [0, 1] under a prebuilt [`FlashGeometry`]: [`encode_display`] of

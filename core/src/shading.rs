@@ -46,7 +46,10 @@ impl ShadingGeometry {
             cos_i: raw_i.maximum(0.0)?,
             cos_o: raw_o.maximum(0.0)?,
             cos_h: dot3(&n, &h)?,
-            sin2_h: cross3(&n, &h)?.sqr()?.sum_keepdim(1)?,
+            sin2_h: {
+                let c = cross3(&n, &h)?;
+                dot3(&c, &c)?
+            },
             cos_d: dot3(wi, &h)?,
             mask,
         })

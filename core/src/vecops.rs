@@ -6,14 +6,16 @@
 use candle_core::Tensor;
 
 use crate::Result;
+use crate::texel_ops::{channel_dot, scale_texels};
 
 /// Squared-length floor inside `normalize3`: keeps the derivative of `sqrt` finite for a zero
 /// vector, and lies far below f32 resolution for any unit-scale vector.
 const NORM_SQ_FLOOR: f64 = 1e-24;
 
-/// Per-texel dot product: (B, 3, H, W) × (B, 3, H, W) → (B, 1, H, W).
+/// Per-texel dot product: (B, 3, H, W) × (B, 3, H, W) → (B, 1, H, W), broadcasting; one fused
+/// pass when the shapes are equal ([`crate::texel_ops::channel_dot`]).
 pub fn dot3(a: &Tensor, b: &Tensor) -> Result<Tensor> {
-    Ok(a.broadcast_mul(b)?.sum_keepdim(1)?)
+    channel_dot(a, b)
 }
 
 /// Per-texel cross product: (B, 3, H, W) × (B, 3, H, W) → (B, 3, H, W), broadcasting.
@@ -29,8 +31,8 @@ pub fn cross3(a: &Tensor, b: &Tensor) -> Result<Tensor> {
 
 /// Per-texel unit vector: (B, 3, H, W) → (B, 3, H, W). A zero vector stays zero.
 pub fn normalize3(v: &Tensor) -> Result<Tensor> {
-    let len = v.sqr()?.sum_keepdim(1)?.maximum(NORM_SQ_FLOOR)?.sqrt()?;
-    Ok(v.broadcast_div(&len)?)
+    let len = channel_dot(v, v)?.maximum(NORM_SQ_FLOOR)?.sqrt()?;
+    scale_texels(v, &len.recip()?)
 }
 
 /// A constant direction (x, y, z) as a (1, 3, 1, 1) tensor of `like`'s dtype and device.
