@@ -30,6 +30,7 @@ pub mod map_stats;
 pub mod maps;
 pub mod microfacet;
 pub mod model;
+pub mod op_derivatives;
 pub mod param;
 pub mod paths;
 pub mod plugin_spec;

@@ -203,28 +203,11 @@ mod tests {
     use candle_core::{DType, Device, Var};
 
     use super::*;
+    use crate::op_derivatives::bilinear_derivatives as derivatives;
     use crate::rng::pseudo_random;
 
     fn max_abs_diff(a: &Tensor, b: &Tensor) -> Result<f64> {
         Ok((a - b)?.abs()?.max_all()?.to_scalar::<f64>()?)
-    }
-
-    /// y and the gradients of L = Σ g ⊙ op(u, v), then of ⟨∂L/∂u, h⟩ w.r.t. v (the second
-    /// derivative that reaches v through the adjoint op's own operand).
-    fn derivatives(
-        op: impl Fn(&Tensor, &Tensor) -> Result<Tensor>,
-        u: &Var,
-        v: &Var,
-        g: &Tensor,
-        h: &Tensor,
-    ) -> Result<Vec<Tensor>> {
-        let y = op(u.as_tensor(), v.as_tensor())?;
-        let first = (&y * g)?.sum_all()?.backward()?;
-        let du = first.get(u.as_tensor()).expect("du").clone();
-        let dv = first.get(v.as_tensor()).expect("dv").clone();
-        let second = (&du * h)?.sum_all()?.backward()?;
-        let ddv = second.get(v.as_tensor()).expect("d²/du dv").clone();
-        Ok(vec![y, du, dv, ddv])
     }
 
     #[test]

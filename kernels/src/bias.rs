@@ -21,7 +21,7 @@ use candle_core::{
 use rayon::prelude::*;
 
 use crate::activation::slice;
-use crate::alloc::output_buffer;
+use crate::plane_ops::map_planes;
 
 /// Elements per rayon task: maps up to this size run on the calling thread (the size from
 /// which candle splits its own element-wise ops, one 256² plane).
@@ -108,30 +108,7 @@ struct AddChannelBias;
 
 impl AddChannelBias {
     fn run<T: WithDType>(x: &[T], bias: &[T], plane: usize) -> Vec<T> {
-        if plane == 0 {
-            return Vec::new();
-        }
-        let c = bias.len();
-        // SAFETY: `f` writes every element of every plane, and the planes cover `out`.
-        let mut out = unsafe { output_buffer(x.len()) };
-        let f = |(i, (o, x)): (usize, (&mut [T], &[T]))| {
-            let b = bias[i % c];
-            for (o, &x) in o.iter_mut().zip(x) {
-                *o = x + b;
-            }
-        };
-        if x.len() <= CHUNK {
-            out.chunks_mut(plane)
-                .zip(x.chunks(plane))
-                .enumerate()
-                .for_each(f);
-        } else {
-            out.par_chunks_mut(plane)
-                .zip(x.par_chunks(plane))
-                .enumerate()
-                .for_each(f);
-        }
-        out
+        map_planes(x, plane, |i| bias[i % bias.len()], |x, b| x + b)
     }
 }
 

@@ -115,6 +115,40 @@ pub(crate) fn scale_planes_in_place<T: WithDType>(
     }
 }
 
+/// `out[i·plane + j] = f(x[i·plane + j], value(i))`: an element-wise op whose second operand
+/// is constant over each plane (consecutive runs of `plane` elements), in one pass, split over
+/// rayon for large maps.
+pub(crate) fn map_planes<T: WithDType>(
+    x: &[T],
+    plane: usize,
+    value: impl Fn(usize) -> T + Sync,
+    f: impl Fn(T, T) -> T + Sync,
+) -> Vec<T> {
+    if plane == 0 {
+        return Vec::new();
+    }
+    // SAFETY: `g` writes every element of every plane, and the planes cover `out`.
+    let mut out = unsafe { output_buffer(x.len()) };
+    let g = |(i, (o, x)): (usize, (&mut [T], &[T]))| {
+        let v = value(i);
+        for (o, &x) in o.iter_mut().zip(x) {
+            *o = f(x, v);
+        }
+    };
+    if x.len() <= CHUNK {
+        out.chunks_mut(plane)
+            .zip(x.chunks(plane))
+            .enumerate()
+            .for_each(g);
+    } else {
+        out.par_chunks_mut(plane)
+            .zip(x.par_chunks(plane))
+            .enumerate()
+            .for_each(g);
+    }
+    out
+}
+
 /// `Σ a[i] · b[i]` with eight independent partial sums, so that the loop vectorises without
 /// reassociating one serial chain (the compiler may not reorder float additions itself).
 fn dot<T: WithDType>(a: &[T], b: &[T]) -> T {
@@ -144,29 +178,7 @@ struct ScalePlanes;
 
 impl ScalePlanes {
     fn run<T: WithDType>(x: &[T], s: &[T], plane: usize) -> Vec<T> {
-        if plane == 0 {
-            return Vec::new();
-        }
-        // SAFETY: `f` writes every element of every plane, and the planes cover `out`.
-        let mut out = unsafe { output_buffer(x.len()) };
-        let f = |(i, (o, x)): (usize, (&mut [T], &[T]))| {
-            let s = s[i];
-            for (o, &x) in o.iter_mut().zip(x) {
-                *o = x * s;
-            }
-        };
-        if x.len() <= CHUNK {
-            out.chunks_mut(plane)
-                .zip(x.chunks(plane))
-                .enumerate()
-                .for_each(f);
-        } else {
-            out.par_chunks_mut(plane)
-                .zip(x.par_chunks(plane))
-                .enumerate()
-                .for_each(f);
-        }
-        out
+        map_planes(x, plane, |i| s[i], |x, s| x * s)
     }
 }
 
@@ -277,10 +289,10 @@ mod tests {
     use super::*;
     use crate::reference::with_reference_ops;
     use crate::testing::max_abs_diff;
+    use photomat_core::op_derivatives::bilinear_derivatives;
     use photomat_core::rng::pseudo_random;
 
-    /// y and the first and second derivatives of L = Σ g ⊙ op(u, v) w.r.t. u and v, the
-    /// second through ⟨∂L/∂u, h⟩ (the shape of R1 and path-length penalties).
+    /// The op's derivatives as a candle result (photomat-core's error type converted).
     fn derivatives(
         op: fn(&Tensor, &Tensor) -> Result<Tensor>,
         u: &Var,
@@ -288,13 +300,7 @@ mod tests {
         g: &Tensor,
         h: &Tensor,
     ) -> Result<Vec<Tensor>> {
-        let y = op(u.as_tensor(), v.as_tensor())?;
-        let first = (&y * g)?.sum_all()?.backward()?;
-        let du = first.get(u.as_tensor()).expect("du").clone();
-        let dv = first.get(v.as_tensor()).expect("dv").clone();
-        let second = (&du * h)?.sum_all()?.backward()?;
-        let ddv = second.get(v.as_tensor()).expect("d²/du dv").clone();
-        Ok(vec![y, du, dv, ddv])
+        bilinear_derivatives(|a, b| Ok(op(a, b)?), u, v, g, h).map_err(candle_core::Error::wrap)
     }
 
     #[test]
