@@ -207,10 +207,8 @@ impl CustomOp2 for BiasLeakyRelu {
         // The mask is constant (zero derivative): detached, so that a second backward does
         // not wait for a gradient of y that no op provides.
         let dz = op.apply(grad, &y.detach())?;
-        // Sum the contiguous trailing dimensions first (candle's fast last-dimension
-        // reduction), then the batch: (B, C, …) → (B, C) → (C).
-        let (b, c) = (dz.dim(0)?, dz.dim(1)?);
-        let dbias = dz.reshape((b, c, ()))?.sum(2)?.sum(0)?;
+        // Each plane summed contiguously, split over rayon ([`crate::channel_sums`]).
+        let dbias = crate::channel_sums(&dz)?;
         Ok((Some(dz), Some(dbias)))
     }
 }

@@ -34,7 +34,7 @@ use crate::conv::{
     Conv2dSpec, Geometry, apply_input_grad, apply_weight_grad, contiguous, conv2d_reference,
     expect_shape, fast_path, forward_into,
 };
-use crate::plane_ops::{plane_dot, scale_planes, scale_planes_in_place};
+use crate::plane_ops::{map_planes, plane_dot, scale_planes, scale_planes_in_place};
 
 /// `d ⊙ conv(s ⊙ x, W)` with `scales` = `s ‖ d` (B, C_in + C_out) when `demodulate`, `s`
 /// alone (B, C_in) otherwise; stride, padding and padding mode from `spec`.
@@ -108,8 +108,7 @@ impl ModulatedConv {
             unreachable!("NCHW geometry")
         };
         let stride = if self.demodulate { ci + co } else { *ci };
-        let mut xs = x.to_vec();
-        scale_planes_in_place(&mut xs, h * wd, |i| scales[(i / ci) * stride + i % ci]);
+        let xs = map_planes(x, h * wd, |i| scales[(i / ci) * stride + i % ci], |x, s| x * s);
         // SAFETY: `forward_into` writes every element of `y`.
         let mut y = unsafe { output_buffer(y_shape.elem_count()) };
         forward_into(g, &xs, w, &mut y, crate::alloc::thread_count());

@@ -171,7 +171,7 @@ impl CustomOp3 for NoiseBiasLeakyRelu {
         let (b, c, h, w) = x.dims4()?;
         let planes = dz.reshape((b, c, h * w))?;
         let dnoise = planes.sum_keepdim(1)?.reshape((b, 1, h, w))?;
-        let dbias = planes.sum(2)?.sum(0)?;
+        let dbias = crate::channel_sums(&dz)?;
         Ok((Some(dz), Some(dnoise), Some(dbias)))
     }
 }
