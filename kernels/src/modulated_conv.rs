@@ -108,7 +108,12 @@ impl ModulatedConv {
             unreachable!("NCHW geometry")
         };
         let stride = if self.demodulate { ci + co } else { *ci };
-        let xs = map_planes(x, h * wd, |i| scales[(i / ci) * stride + i % ci], |x, s| x * s);
+        let xs = map_planes(
+            x,
+            h * wd,
+            |i| scales[(i / ci) * stride + i % ci],
+            |x, s| x * s,
+        );
         // SAFETY: `forward_into` writes every element of `y`.
         let mut y = unsafe { output_buffer(y_shape.elem_count()) };
         forward_into(g, &xs, w, &mut y, crate::alloc::thread_count());
