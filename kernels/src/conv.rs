@@ -37,7 +37,7 @@ use crate::alloc::output_buffer;
 
 /// Target size of one band of `col(x)`: half a core's L2 (1 MiB on the build machine), so that
 /// the band is still in L2 when `gemm` packs it, while `gemm` still sees ≥ a few hundred
-/// columns (≈ 220 for a 3×3 64-channel f32 layer). Measured against 256 KiB … 8 MiB on the
+/// columns (≈ 227 for a 3×3 64-channel f32 layer). Measured against 256 KiB … 8 MiB on the
 /// bench's steps and convs (`docs/benchmarks.md`, "The band of `col(x)` sized to L2"): the
 /// 2 MiB chosen before from the cache sizes alone was 2–19 % slower.
 pub const COL_TILE_BYTES: usize = 512 << 10;
@@ -377,8 +377,41 @@ impl<'a, T> Mat<'a, T> {
 /// `dst (m × n, row stride dst_rs) = [dst +] lhs (m × k) · rhs (k × n)` with the `gemm` crate.
 #[allow(clippy::too_many_arguments)]
 fn matmul<T: WithDType>(
-    (m, n, k): (usize, usize, usize),
+    dims: (usize, usize, usize),
     dst: &mut [T],
+    dst_rs: usize,
+    accumulate: bool,
+    lhs: Mat<'_, T>,
+    rhs: Mat<'_, T>,
+    threads: usize,
+) {
+    // SAFETY: `dst` is a live, exclusively borrowed slice of `dst.len()` elements, so it
+    // aliases neither operand and no other thread touches it.
+    unsafe {
+        matmul_raw(
+            dims,
+            (dst.as_mut_ptr(), dst.len()),
+            dst_rs,
+            accumulate,
+            lhs,
+            rhs,
+            threads,
+        )
+    }
+}
+
+/// [`matmul`] into `dst_len` elements from a raw pointer: for tasks that write disjoint,
+/// interleaved rows of one buffer at the same time (the band-parallel forward), where
+/// slices of the buffer would overlap.
+///
+/// # Safety
+/// `dst.0` is valid for reads and writes of `dst.1` elements; the elements this product writes
+/// (rows `0..m` at stride `dst_rs`, columns `0..n`) are neither read nor written by any other
+/// thread while it runs, and overlap neither operand.
+#[allow(clippy::too_many_arguments)]
+unsafe fn matmul_raw<T: WithDType>(
+    (m, n, k): (usize, usize, usize),
+    dst: (*mut T, usize),
     dst_rs: usize,
     accumulate: bool,
     lhs: Mat<'_, T>,
@@ -391,7 +424,7 @@ fn matmul<T: WithDType>(
     lhs.check(m, k);
     rhs.check(k, n);
     assert!(
-        (m - 1) * dst_rs + n <= dst.len(),
+        (m - 1) * dst_rs + n <= dst.1,
         "gemm destination out of bounds"
     );
     let parallelism = if threads > 1 {
@@ -400,14 +433,14 @@ fn matmul<T: WithDType>(
         Parallelism::None
     };
     let one = T::from_f64(1.0);
-    // SAFETY: the three views were bounds-checked above; `dst` is borrowed mutably, so it
-    // aliases neither operand.
+    // SAFETY: the three views were bounds-checked above; the caller guarantees that the
+    // destination's written elements are exclusively this call's and alias neither operand.
     unsafe {
         gemm::gemm(
             m,
             n,
             k,
-            dst.as_mut_ptr(),
+            dst.0,
             1,
             dst_rs as isize,
             accumulate,
@@ -461,17 +494,13 @@ pub(crate) fn forward_into<T: WithDType>(
 ) {
     let (x_len, y_len, k) = (g.ci * g.h * g.w, g.co * g.ho * g.wo, g.k());
     let n_out = g.ho * g.wo;
-    let y_addr = y.as_mut_ptr() as usize;
+    let (y_addr, y_total) = (y.as_mut_ptr() as usize, y.len());
     let maps: Vec<TapMap> = (0..g.kw).map(|kx| g.column_map(kx)).collect();
     let band = g.band_rows(size_of::<T>());
     let col_len = if g.is_pointwise() { 0 } else { k * band * g.wo };
     // Output rows r0..r0 + band of image i; `col` holds at least one band.
     let run_band = |i: usize, r0: usize, col: &mut [T], gemm_threads: usize| {
         let xi = &x[i * x_len..(i + 1) * x_len];
-        // SAFETY: each call writes rows r0..r1 of every output channel of image i, and no two
-        // calls running at the same time share an (image, band) pair; `y` outlives the calls.
-        let yi =
-            unsafe { std::slice::from_raw_parts_mut((y_addr as *mut T).add(i * y_len), y_len) };
         let r1 = (r0 + band).min(g.ho);
         let n = (r1 - r0) * g.wo;
         let rhs = if g.is_pointwise() {
@@ -480,15 +509,25 @@ pub(crate) fn forward_into<T: WithDType>(
             im2col(g, &maps, xi, (r0, r1), &mut col[..k * n]);
             Mat::new(&col[..k * n], n, 1)
         };
-        matmul(
-            (g.co, n, k),
-            &mut yi[r0 * g.wo..],
-            n_out,
-            false,
-            Mat::new(w, k, 1),
-            rhs,
-            gemm_threads,
-        );
+        // Output rows r0..r1 of every channel of image i: element r0·W_out of the image's
+        // output onward, channel rows `n_out` apart.
+        let offset = i * y_len + r0 * g.wo;
+        // SAFETY: `y` (`y_total` = B·y_len elements at `y_addr`) outlives every call, and `offset` lies in
+        // it. A call writes columns r0·W_out.. r1·W_out of each channel row of image i; calls
+        // running at the same time have distinct (image, band) pairs, so the elements they
+        // write are disjoint, and `y` is no operand. No slice of `y` is formed here, since
+        // those of concurrent bands would overlap.
+        unsafe {
+            matmul_raw(
+                (g.co, n, k),
+                ((y_addr as *mut T).add(offset), y_total - offset),
+                n_out,
+                false,
+                Mat::new(w, k, 1),
+                rhs,
+                gemm_threads,
+            );
+        }
     };
     let bands = g.ho.div_ceil(band);
     if threads > 1 && g.b < threads && g.b * bands >= 2 * threads {

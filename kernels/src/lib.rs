@@ -18,8 +18,9 @@
 //!   (StyleGAN2's `upfirdn2d` with the `[1, 3, 3, 1]` filter), differentiable to any order.
 //! - [`modulated_conv2d`]: StyleGAN2's modulated convolution (input styles, shared-weight
 //!   conv, output demodulation) as one op with a seven-pass backward ([`modulated_conv`]).
-//! - [`periodic_window`]: a window of each sample's periodic extension (a tileable output
-//!   rolled and cut), one gather forward and one scatter-add backward ([`periodic_window`]).
+//! - [`periodic_window()`]: a window of each sample's periodic extension (a tileable output
+//!   rolled and cut), one gather forward and one scatter-add backward
+//!   ([`mod@periodic_window`]).
 //! - [`scale_planes`], [`plane_dot`]: per-plane scaling and per-plane dot products, each the
 //!   other's adjoint, one pass each ([`plane_ops`]).
 //! - [`noise_bias_leaky_relu_gain`]: a synthesis layer's epilogue (noise, bias, LeakyReLU ×

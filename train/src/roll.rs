@@ -45,7 +45,8 @@ pub fn roll_per_sample(x: &Tensor, offsets: &[(usize, usize)]) -> Result<Tensor>
 /// compose a dozen copies). Differentiable to any order.
 ///
 /// # Shapes
-/// (B, C, H, W) with B = `offsets.len()`, every Δrow < H and Δcol < W → (B, C, h', w').
+/// (B, C, H, W) with B = `offsets.len()` and H, W ≥ 1 (offsets of any size wrap) →
+/// (B, C, h', w').
 pub fn window_per_sample(
     x: &Tensor,
     offsets: &[(usize, usize)],
@@ -54,6 +55,9 @@ pub fn window_per_sample(
     let (b, _c, h, w) = x.dims4()?;
     if offsets.len() != b {
         bail!("roll: {} offsets for a batch of {b}", offsets.len());
+    }
+    if h == 0 || w == 0 {
+        bail!("roll: an empty {h}×{w} map");
     }
     // Output texel (i, j) reads input texel ((i − Δrow) mod H, (j − Δcol) mod W): the window
     // starts at ((H − Δrow) mod H, (W − Δcol) mod W).
