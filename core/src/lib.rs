@@ -3,7 +3,7 @@
 //! The conventions every photomat crate shares (`docs/conventions.md`): the
 //! [`DifferentiableBrdf`] trait and its parameter specs, the plugin [`registry`], the shared
 //! [`microfacet`] maths, the collocated-[`flash`] plane geometry, the differentiable
-//! [`render`]er with its per-texel vector algebra ([`vecops`], fused in [`texel_ops`]), the
+//! [`mod@render`]er with its per-texel vector algebra ([`vecops`], fused in [`texel_ops`]), the
 //! material-map folder format ([`map_files`]), the seeded random generator every crate draws
 //! from ([`rng`]), the conformance kit every plugin's tests run ([`testing`]) and the
 //! derivative checks of fused ops' tests ([`op_derivatives`]).
