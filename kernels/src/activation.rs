@@ -23,9 +23,7 @@ use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
 
-/// Elements per rayon task. Tensors up to this size run on the calling thread; candle splits
-/// its own element-wise ops from the same size (65,536 elements, one 256² channel) on.
-const CHUNK: usize = 1 << 16;
+use crate::threads::ELEMENTWISE_CHUNK as CHUNK;
 
 /// `out[i] = f(a[i], b[i])`, split over rayon tasks of [`CHUNK`] elements.
 fn zip_map<T: candle_core::WithDType>(a: &[T], b: &[T], f: impl Fn(T, T) -> T + Sync) -> Vec<T> {

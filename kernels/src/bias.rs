@@ -21,25 +21,23 @@ use candle_core::{
 use rayon::prelude::*;
 
 use crate::activation::slice;
-use crate::plane_ops::map_planes;
+use crate::plane_ops::{fast_path, leading_dims, map_planes, plane_len};
 
-/// Elements per rayon task: maps up to this size run on the calling thread (the size from
-/// which candle splits its own element-wise ops, one 256² plane).
-const CHUNK: usize = 1 << 16;
+use crate::threads::ELEMENTWISE_CHUNK as CHUNK;
 
 /// `x + bias` with `bias` along dimension 1 (channels).
 ///
 /// # Shapes
 /// x (B, C, …) of rank ≥ 2, bias (C) → x's shape.
 pub fn add_channel_bias(x: &Tensor, bias: &Tensor) -> Result<Tensor> {
-    let c = channels(x, "add_channel_bias")?;
+    let (_, c) = leading_dims(x, "add_channel_bias")?;
     if bias.dims() != [c] {
         bail!(
             "add_channel_bias: bias {:?} does not match {c} channels",
             bias.dims()
         );
     }
-    if fast_path(x) && fast_path(bias) && x.dtype() == bias.dtype() {
+    if fast_path(x, bias) {
         x.contiguous()?
             .apply_op2(&bias.contiguous()?, AddChannelBias)
     } else {
@@ -52,19 +50,11 @@ pub fn add_channel_bias(x: &Tensor, bias: &Tensor) -> Result<Tensor> {
 /// # Shapes
 /// x (B, C, …) of rank ≥ 2 → (C).
 pub fn channel_sums(x: &Tensor) -> Result<Tensor> {
-    let c = channels(x, "channel_sums")?;
-    if fast_path(x) {
+    let (_, c) = leading_dims(x, "channel_sums")?;
+    if fast_path(x, x) {
         x.contiguous()?.apply_op1(ChannelSums)
     } else {
         x.transpose(0, 1)?.reshape((c, ()))?.sum(1)
-    }
-}
-
-/// C of a tensor of rank ≥ 2, or an error naming `op`.
-fn channels(x: &Tensor, op: &str) -> Result<usize> {
-    match x.dims() {
-        [_, c, ..] => Ok(*c),
-        dims => bail!("{op}: expected a map of rank ≥ 2, got {dims:?}"),
     }
 }
 
@@ -75,17 +65,10 @@ fn channel_shape(x: &Tensor) -> Vec<usize> {
     shape
 }
 
-/// Whether a tensor takes the fused CPU kernels.
-fn fast_path(x: &Tensor) -> bool {
-    x.device().is_cpu()
-        && matches!(x.dtype(), candle_core::DType::F32 | candle_core::DType::F64)
-        && !crate::reference::reference_ops()
-}
-
 /// (batch, channels, elements per plane) of a (B, C, …) layout.
 fn planes(l: &Layout) -> (usize, usize, usize) {
     let dims = l.shape().dims();
-    (dims[0], dims[1], dims[2..].iter().product())
+    (dims[0], dims[1], plane_len(l))
 }
 
 /// `Σ v[i]` with eight independent partial sums, so that the loop vectorises (the compiler
@@ -188,9 +171,9 @@ impl CustomOp1 for ChannelSums {
 
     fn bwd(&self, x: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
         // Each input element adds once to its channel's sum: the gradient broadcast back.
-        let mut shape = vec![1; x.rank()];
-        shape[1] = x.dim(1)?;
-        Ok(Some(grad.reshape(shape)?.broadcast_as(x.shape())?))
+        Ok(Some(
+            grad.reshape(channel_shape(x))?.broadcast_as(x.shape())?,
+        ))
     }
 }
 

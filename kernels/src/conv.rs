@@ -38,8 +38,8 @@ use crate::alloc::output_buffer;
 /// Target size of one band of `col(x)`: half a core's L2 (1 MiB on the build machine), so that
 /// the band is still in L2 when `gemm` packs it, while `gemm` still sees ≥ a few hundred
 /// columns (≈ 227 for a 3×3 64-channel f32 layer). Measured against 256 KiB … 8 MiB on the
-/// bench's steps and convs (`docs/benchmarks.md`, "The band of `col(x)` sized to L2"): the
-/// 2 MiB chosen before from the cache sizes alone was 2–19 % slower.
+/// bench's steps and convs (`docs/benchmarks.md`, "The band of `col(x)` sized to L2"): it
+/// took 0.81–0.98× the time of the 2 MiB chosen before from the cache sizes alone.
 pub const COL_TILE_BYTES: usize = 512 << 10;
 
 /// How the border of the input is extended.
@@ -215,6 +215,16 @@ impl Geometry {
     /// Output rows per band of `col(x)` for element size `elem` bytes.
     fn band_rows(&self, elem: usize) -> usize {
         (COL_TILE_BYTES / (elem * self.k() * self.wo)).clamp(1, self.ho)
+    }
+
+    /// Elements of the buffer that holds one band of `band` output rows of `col(x)`; none for
+    /// a pointwise conv, whose `col(x)` is `x`.
+    fn col_len(&self, band: usize) -> usize {
+        if self.is_pointwise() {
+            0
+        } else {
+            self.k() * band * self.wo
+        }
     }
 
     /// Where output column `ox` reads for kernel column `kx`: an input column, or
@@ -497,7 +507,7 @@ pub(crate) fn forward_into<T: WithDType>(
     let (y_addr, y_total) = (y.as_mut_ptr() as usize, y.len());
     let maps: Vec<TapMap> = (0..g.kw).map(|kx| g.column_map(kx)).collect();
     let band = g.band_rows(size_of::<T>());
-    let col_len = if g.is_pointwise() { 0 } else { k * band * g.wo };
+    let col_len = g.col_len(band);
     // Output rows r0..r0 + band of image i; `col` holds at least one band.
     let run_band = |i: usize, r0: usize, col: &mut [T], gemm_threads: usize| {
         let xi = &x[i * x_len..(i + 1) * x_len];
@@ -512,11 +522,11 @@ pub(crate) fn forward_into<T: WithDType>(
         // Output rows r0..r1 of every channel of image i: element r0·W_out of the image's
         // output onward, channel rows `n_out` apart.
         let offset = i * y_len + r0 * g.wo;
-        // SAFETY: `y` (`y_total` = B·y_len elements at `y_addr`) outlives every call, and `offset` lies in
-        // it. A call writes columns r0·W_out.. r1·W_out of each channel row of image i; calls
-        // running at the same time have distinct (image, band) pairs, so the elements they
-        // write are disjoint, and `y` is no operand. No slice of `y` is formed here, since
-        // those of concurrent bands would overlap.
+        // SAFETY: `y` (`y_total` = B·y_len elements at `y_addr`) outlives every call, and
+        // `offset` lies in it. A call writes columns r0·W_out .. r1·W_out of each channel row
+        // of image i; calls running at the same time have distinct (image, band) pairs, so the
+        // elements they write are disjoint, and `y` is no operand. No slice of `y` is formed
+        // here, since those of concurrent bands would overlap.
         unsafe {
             matmul_raw(
                 (g.co, n, k),
@@ -562,7 +572,7 @@ fn input_grad_into<T: WithDType>(g: &Geometry, dy: &[T], w: &[T], dx: &mut [T], 
     over_batch(g.b, threads, |first, count, gemm_threads| {
         // SAFETY: the product into `col[..k·n]` (not accumulating) writes the part of `col` a
         // band uses before the scatter back into `dx` reads it.
-        let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
+        let mut col = unsafe { output_buffer(g.col_len(band)) };
         for i in first..first + count {
             let dyi = &dy[i * y_len..(i + 1) * y_len];
             // SAFETY: as in `forward_into`, tasks write disjoint images.
@@ -610,7 +620,7 @@ fn weight_grad_into<T: WithDType>(g: &Geometry, x: &[T], dy: &[T], dw: &mut [T],
     let partials = over_batch(g.b, threads, |first, count, gemm_threads| {
         let mut acc = vec![T::from_f64(0.0); g.co * k];
         // SAFETY: `im2col` writes the part of `col` a band uses before the product reads it.
-        let mut col = unsafe { output_buffer(if g.is_pointwise() { 0 } else { k * band * g.wo }) };
+        let mut col = unsafe { output_buffer(g.col_len(band)) };
         for i in first..first + count {
             let xi = &x[i * x_len..(i + 1) * x_len];
             let dyi = &dy[i * y_len..(i + 1) * y_len];

@@ -27,9 +27,7 @@ use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
 
-/// Output elements from which a pass is split over rayon tasks (candle splits its own
-/// element-wise ops from the same size, one 256² plane).
-const PARALLEL_ELEMENTS: usize = 1 << 16;
+use crate::threads::ELEMENTWISE_CHUNK as PARALLEL_ELEMENTS;
 
 /// A constant `n_out × n_in` matrix stored as compressed rows: row `r` holds the pairs
 /// `(cols[t], weights[t])` for `t` in `starts[r]..starts[r + 1]`, columns increasing and

@@ -91,7 +91,7 @@ impl NoiseBiasLeakyRelu {
                 *o = if z > zero { p * z } else { n * z };
             }
         };
-        if x.len() < 1 << 16 {
+        if x.len() < crate::threads::ELEMENTWISE_CHUNK {
             out.chunks_mut(hw)
                 .zip(x.chunks(hw))
                 .enumerate()

@@ -25,9 +25,7 @@ use rayon::prelude::*;
 use crate::activation::slice;
 use crate::alloc::output_buffer;
 
-/// Elements per rayon task: maps up to this size run on the calling thread (the size from
-/// which candle splits its own element-wise ops, one 256² plane).
-const CHUNK: usize = 1 << 16;
+use crate::threads::ELEMENTWISE_CHUNK as CHUNK;
 
 /// The `(h', w')` window at `origins[b]` = (row, column) of each sample's periodic extension.
 ///

@@ -30,9 +30,7 @@ use rayon::prelude::*;
 use crate::activation::slice;
 use crate::alloc::output_buffer;
 
-/// Elements per rayon task: maps up to this size run on the calling thread (the size from
-/// which candle splits its own element-wise ops, one 256² plane).
-const CHUNK: usize = 1 << 16;
+use crate::threads::ELEMENTWISE_CHUNK as CHUNK;
 
 /// `x[b, c, …] · s[b, c]`.
 ///
@@ -74,7 +72,7 @@ pub fn plane_dot(a: &Tensor, b: &Tensor) -> Result<Tensor> {
 }
 
 /// (B, C) of a tensor of rank ≥ 2, or an error naming `op`.
-fn leading_dims(x: &Tensor, op: &str) -> Result<(usize, usize)> {
+pub(crate) fn leading_dims(x: &Tensor, op: &str) -> Result<(usize, usize)> {
     match x.dims() {
         [b, c, ..] => Ok((*b, *c)),
         dims => bail!("{op}: expected a map of rank ≥ 2, got {dims:?}"),
@@ -88,8 +86,9 @@ fn plane_broadcast_shape(x: &Tensor) -> Vec<usize> {
     shape
 }
 
-/// Whether both operands take the fused CPU kernels.
-fn fast_path(a: &Tensor, b: &Tensor) -> bool {
+/// Whether both operands take the fused CPU kernels (CPU, one float dtype, outside
+/// [`crate::reference::with_reference_ops`]).
+pub(crate) fn fast_path(a: &Tensor, b: &Tensor) -> bool {
     a.device().is_cpu()
         && b.device().is_cpu()
         && a.dtype() == b.dtype()
@@ -172,7 +171,7 @@ fn dot<T: WithDType>(a: &[T], b: &[T]) -> T {
 }
 
 /// Elements per plane of a (B, C, …) layout (1 for rank 2).
-fn plane_len(l: &Layout) -> usize {
+pub(crate) fn plane_len(l: &Layout) -> usize {
     l.shape().dims()[2..].iter().product()
 }
 

@@ -13,6 +13,11 @@
 //! `RAYON_NUM_THREADS` threads, which [`fix_rayon_thread_count`] writes down once; a run that
 //! has the machine to itself may set `CANDLE_NUM_THREADS=2`.
 
+/// Elements from which this crate's element-wise passes split over rayon tasks of this size;
+/// smaller tensors run on the calling thread. candle splits its own element-wise ops from the
+/// same size (65,536 elements, one 256² plane).
+pub(crate) const ELEMENTWISE_CHUNK: usize = 1 << 16;
+
 /// The variable rayon's global pool and candle's GEMMs read for their thread count.
 pub const RAYON_THREADS_VAR: &str = "RAYON_NUM_THREADS";
 
