@@ -137,14 +137,82 @@ impl FeatureExtractor for PooledConvStack {
                 break;
             }
             for layer in stage {
-                let co = layer.bias.dims()[0];
-                x = conv2d(&x, &layer.weight, self.padding)?
-                    .broadcast_add(&layer.bias.reshape((1, co, 1, 1))?)?
-                    .relu()?;
+                // Bias + ReLU (LeakyReLU of slope 0) as one fused pass each way.
+                x = photomat_kernels::bias_leaky_relu_gain(
+                    &conv2d(&x, &layer.weight, self.padding)?,
+                    &layer.bias,
+                    0.0,
+                    1.0,
+                )?;
             }
             x = avg_pool2x2(&x)?;
             out.push(x.clone());
         }
         Ok(out)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::Var;
+
+    use super::*;
+    use crate::test_util::{max_abs_diff, pseudo_random};
+
+    #[test]
+    fn features_and_their_input_gradient_equal_conv_bias_then_relu() -> Result<()> {
+        let dev = Device::Cpu;
+        let layer = |co: usize, ci: usize, seed: u64| -> Result<ConvLayer> {
+            Ok(ConvLayer {
+                weight: pseudo_random((co, ci, 3, 3), seed, DType::F64, &dev)?,
+                bias: pseudo_random(co, seed + 1, DType::F64, &dev)?,
+            })
+        };
+        let stages = vec![
+            vec![layer(4, 3, 1)?, layer(5, 4, 3)?],
+            vec![layer(6, 5, 5)?],
+        ];
+        let padding = Conv2dSpec::circular(1, 1);
+        let (mean, std) = ([0.4, 0.5, 0.6], [0.2, 0.25, 0.3]);
+        let stack = PooledConvStack::new(stages.clone(), mean, std, padding, "test".into())?;
+        let images = Var::from_tensor(&pseudo_random((2, 3, 8, 8), 7, DType::F64, &dev)?)?;
+
+        // The same network from candle ops: broadcast bias, then `relu`.
+        let reference = |x: &Tensor| -> Result<Vec<Tensor>> {
+            let m = Tensor::new(&mean, &dev)?.reshape((1, 3, 1, 1))?;
+            let s = Tensor::new(&std, &dev)?.reshape((1, 3, 1, 1))?;
+            let mut x = x.broadcast_sub(&m)?.broadcast_div(&s)?;
+            let mut out = Vec::new();
+            for stage in &stages {
+                for l in stage {
+                    let co = l.bias.dims()[0];
+                    x = conv2d(&x, &l.weight, padding)?
+                        .broadcast_add(&l.bias.reshape((1, co, 1, 1))?)?
+                        .relu()?;
+                }
+                x = avg_pool2x2(&x)?;
+                out.push(x.clone());
+            }
+            Ok(out)
+        };
+        let ours = stack.features(images.as_tensor())?;
+        let theirs = reference(images.as_tensor())?;
+        let loss = |f: &[Tensor]| -> Result<Tensor> {
+            f.iter()
+                .map(|t| t.sqr()?.sum_all())
+                .try_fold(Tensor::new(0f64, &dev)?, |a, b| a + b?)
+        };
+        let (ga, gb) = (loss(&ours)?.backward()?, loss(&theirs)?.backward()?);
+        for (a, b) in ours.iter().zip(&theirs) {
+            // f64, ≤ 45-term sums in the same order, the normalisation as a product instead of
+            // a quotient: rounding-level differences.
+            assert!(max_abs_diff(a, b)? < 1e-12);
+        }
+        let (da, db) = (
+            ga.get(images.as_tensor()).expect("gradient"),
+            gb.get(images.as_tensor()).expect("gradient"),
+        );
+        assert!(max_abs_diff(da, db)? < 1e-10);
+        Ok(())
     }
 }
