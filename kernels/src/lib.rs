@@ -22,7 +22,8 @@
 //!   rolled and cut), one gather forward and one scatter-add backward
 //!   ([`mod@periodic_window`]).
 //! - [`scale_planes`], [`plane_dot`]: per-plane scaling and per-plane dot products, each the
-//!   other's adjoint, one pass each ([`plane_ops`]).
+//!   other's adjoint, one pass each; [`sum_over_channels`]: each sample's planes added
+//!   ([`plane_ops`]).
 //! - [`noise_bias_leaky_relu_gain`]: a synthesis layer's epilogue (noise, bias, LeakyReLU ×
 //!   gain) as one element-wise pass each way ([`noise_act`]).
 //! - [`reference`]: a per-thread switch sending every op to its candle reference composition
@@ -65,5 +66,5 @@ pub use mlp::{
 pub use modulated_conv::{modulated_conv2d, modulated_conv2d_reference};
 pub use noise_act::noise_bias_leaky_relu_gain;
 pub use periodic_window::{periodic_window, periodic_window_reference};
-pub use plane_ops::{plane_dot, scale_planes};
+pub use plane_ops::{plane_dot, scale_planes, sum_over_channels};
 pub use reference::{reference_ops, with_reference_ops};

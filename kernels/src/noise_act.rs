@@ -156,7 +156,7 @@ impl CustomOp3 for NoiseBiasLeakyRelu {
 
     fn bwd(
         &self,
-        x: &Tensor,
+        _x: &Tensor,
         _noise: &Tensor,
         _bias: &Tensor,
         y: &Tensor,
@@ -168,9 +168,7 @@ impl CustomOp3 for NoiseBiasLeakyRelu {
         };
         // The mask is constant (zero derivative a.e.): detached, as in `activation`.
         let dz = op.apply(grad, &y.detach())?;
-        let (b, c, h, w) = x.dims4()?;
-        let planes = dz.reshape((b, c, h * w))?;
-        let dnoise = planes.sum_keepdim(1)?.reshape((b, 1, h, w))?;
+        let dnoise = crate::plane_ops::sum_over_channels(&dz)?;
         let dbias = crate::channel_sums(&dz)?;
         Ok((Some(dz), Some(dnoise), Some(dbias)))
     }

@@ -6,6 +6,7 @@
 //! ```text
 //! scale_planes(x, s)[b, c, p] = x[b, c, p] · s[b, c]
 //! plane_dot(a, b)[b, c]       = Σ_p a[b, c, p] · b[b, c, p]
+//! sum_over_channels(x)[b, 0, p] = Σ_c x[b, c, p]
 //! ```
 //!
 //! Composed from candle ops the first is a broadcast multiplication, whose backward runs a
@@ -19,12 +20,17 @@
 //! ```
 //!
 //! so gradients of gradients (path-length regularisation through G; `docs/neural-models.md`,
-//! "GAN training") stay on these ops.
+//! "GAN training") stay on these ops. The third, the gradient of one plane broadcast over the
+//! channels (a synthesis layer's noise image, `crate::noise_act`), is candle's strided
+//! reduction over dimension 1 when composed; here it adds whole planes, and its backward is
+//! the broadcast back (a candle view, differentiable).
 //!
 //! CPU tensors of dtype f32 and f64 take this path; other devices and dtypes, and calls inside
 //! [`crate::reference::with_reference_ops`], use the candle compositions above.
 
-use candle_core::{CpuStorage, CustomOp2, Layout, Result, Shape, Tensor, WithDType, bail};
+use candle_core::{
+    CpuStorage, CustomOp1, CustomOp2, Layout, Result, Shape, Tensor, WithDType, bail,
+};
 use rayon::prelude::*;
 
 use crate::activation::slice;
@@ -68,6 +74,19 @@ pub fn plane_dot(a: &Tensor, b: &Tensor) -> Result<Tensor> {
         a.contiguous()?.apply_op2(&b.contiguous()?, PlaneDot)
     } else {
         (a * b)?.reshape((batch, c, ()))?.sum(2)
+    }
+}
+
+/// `Σ_c x[b, c, …]`: the planes of each sample added together.
+///
+/// # Shapes
+/// x (B, C, …) of rank ≥ 2 → (B, 1, …).
+pub fn sum_over_channels(x: &Tensor) -> Result<Tensor> {
+    leading_dims(x, "sum_over_channels")?;
+    if fast_path(x, x) {
+        x.contiguous()?.apply_op1(SumOverChannels)
+    } else {
+        x.sum_keepdim(1)
     }
 }
 
@@ -284,6 +303,70 @@ impl CustomOp2 for PlaneDot {
     }
 }
 
+/// x → `Σ_c x` per sample (module docs).
+struct SumOverChannels;
+
+impl SumOverChannels {
+    /// Each sample's `channels` planes of `plane` elements added, in channel order; samples,
+    /// and chunks of a long plane, split over rayon for large maps.
+    fn run<T: WithDType>(x: &[T], channels: usize, plane: usize) -> Vec<T> {
+        // SAFETY: `add` writes every element of each output chunk before adding into it.
+        let mut out = unsafe { output_buffer(x.len() / channels.max(1)) };
+        if plane == 0 || channels == 0 {
+            out.fill(T::from_f64(0.0));
+            return out;
+        }
+        // Output elements start..start + o.len() of sample `b`.
+        let add = |b: usize, start: usize, o: &mut [T]| {
+            let len = o.len();
+            let at = |c: usize| &x[(b * channels + c) * plane + start..][..len];
+            o.copy_from_slice(at(0));
+            for c in 1..channels {
+                for (d, &v) in o.iter_mut().zip(at(c)) {
+                    *d += v;
+                }
+            }
+        };
+        if x.len() <= CHUNK {
+            out.chunks_mut(plane)
+                .enumerate()
+                .for_each(|(b, o)| add(b, 0, o));
+        } else {
+            // Chunks of about CHUNK / C outputs, so that each task reads about CHUNK inputs.
+            let piece = (CHUNK / channels).clamp(1, plane);
+            out.par_chunks_mut(plane).enumerate().for_each(|(b, o)| {
+                o.par_chunks_mut(piece)
+                    .enumerate()
+                    .for_each(|(k, o)| add(b, k * piece, o))
+            });
+        }
+        out
+    }
+}
+
+impl CustomOp1 for SumOverChannels {
+    fn name(&self) -> &'static str {
+        "sum-over-channels"
+    }
+
+    fn cpu_fwd(&self, x: &CpuStorage, lx: &Layout) -> Result<(CpuStorage, Shape)> {
+        let (name, plane) = (self.name(), plane_len(lx));
+        let mut dims = lx.shape().dims().to_vec();
+        let channels = dims[1];
+        dims[1] = 1;
+        let out = match x {
+            CpuStorage::F32(x) => CpuStorage::F32(Self::run(slice(x, lx, name)?, channels, plane)),
+            CpuStorage::F64(x) => CpuStorage::F64(Self::run(slice(x, lx, name)?, channels, plane)),
+            _ => bail!("{name}: expected f32 or f64"),
+        };
+        Ok((out, Shape::from(dims)))
+    }
+
+    fn bwd(&self, x: &Tensor, _y: &Tensor, grad: &Tensor) -> Result<Option<Tensor>> {
+        Ok(Some(grad.broadcast_as(x.shape())?))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use candle_core::{DType, Device, Var};
@@ -339,6 +422,31 @@ mod tests {
                     "plane_dot case {i}, output {j}"
                 );
             }
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn sum_over_channels_matches_candle_and_its_gradient_is_the_broadcast() -> Result<()> {
+        let dev = Device::Cpu;
+        // Small odd planes, one channel, and a map above the rayon split with planes cut into
+        // pieces (2·8·64·64 > CHUNK, piece = CHUNK / 8 < 4096).
+        for (i, dims) in [(2, 3, 5, 7), (3, 1, 4, 4), (2, 8, 64, 64)]
+            .into_iter()
+            .enumerate()
+        {
+            let x = Var::from_tensor(&pseudo_random(dims, 30 + i as u64, DType::F64, &dev)?)?;
+            let sum = sum_over_channels(x.as_tensor())?;
+            let reference = x.as_tensor().sum_keepdim(1)?;
+            assert_eq!(sum.dims(), reference.dims());
+            // f64 sums of ≤ 8 O(1) terms in the same order: equal up to rounding.
+            assert!(max_abs_diff(&sum, &reference)? < 1e-12, "case {i}");
+            // L = Σ g ⊙ sum ⇒ dL/dx[b, c, p] = g[b, 0, p] for every channel c.
+            let g = pseudo_random(sum.dims(), 40 + i as u64, DType::F64, &dev)?;
+            let grads = (&sum * &g)?.sum_all()?.backward()?;
+            let dx = grads.get(x.as_tensor()).expect("a gradient");
+            let expected = g.broadcast_as(dims)?;
+            assert!(max_abs_diff(dx, &expected)? == 0.0, "case {i}");
         }
         Ok(())
     }
