@@ -11,7 +11,8 @@
 //! validation/run.sh --count 8 --seed 1 --capture-set --out capval
 //! cargo run --release -p photomat-capture --example mitsuba_validation -- capval MODEL [SHEET.png]
 //! ```
-//! MODEL: a model folder with an estimator for `height(ggx, scale=0.02)` (e.g. models/demo).
+//! MODEL: a model folder with a `height(ggx, …)` estimator (e.g. models/demo); the direct fit
+//! captures in the same specification, relief scale included.
 //! Each photo is captured at its own 320² with its true field of view and the default
 //! detector's highlight; FIRST and COUNT take a slice of the set (to run halves side by side). Measures ([`photomat_capture::evaluate`]): the display L1 under the
 //! photo's flash (against the photo) and under the eight held-out flashes (against Mitsuba's
@@ -34,7 +35,7 @@ use photomat_core::image_io::{PlanarImage, PngBits, write_png};
 use photomat_core::map_files::load_maps;
 use photomat_core::render::DISPLAY_GAMMA;
 use photomat_core::sheet::grid;
-use photomat_core::{Brdf, Highlight, MaterialMaps, encode_display, lookup};
+use photomat_core::{Brdf, Highlight, MaterialMaps, encode_display};
 
 const SIZE: usize = 320;
 const METHODS: [&str; 4] = ["constant", "direct", "E only", "prior"];
@@ -101,7 +102,13 @@ fn main() -> anyhow::Result<()> {
     let first: usize = args.get(3).map_or(Ok(0), |s| s.parse())?;
     let count: usize = args.get(4).map_or(Ok(usize::MAX), |s| s.parse())?;
 
-    let brdf = lookup("height(ggx, scale=0.02)")?;
+    // The model's `height(ggx, …)` estimator sets the relief scale both fits capture in.
+    let brdf = GanPrior::open_all(&model, &Device::Cpu)?
+        .estimators()
+        .iter()
+        .map(|e| e.brdf().clone())
+        .find(|b| b.name().starts_with("height(ggx"))
+        .with_context(|| format!("'{}' has no height(ggx) estimator", model.display()))?;
     let prior = GanPrior::open(&model, &brdf, &Device::Cpu)?
         .with_context(|| format!("'{}' has no estimator for {}", model.display(), brdf.name()))?;
     let record: serde_json::Value =

@@ -11,8 +11,8 @@
 //! cargo run --release -p photomat-capture --example prior_validation -- SIM MODEL [PER_FAMILY] [ANCHOR]
 //! ```
 //! SIM: a `photomat simulate` folder of square photos (truth/, simulation.json); MODEL: a
-//! model folder with an estimator for each truth's BRDF (e.g. models/demo for `height(ggx)`:
-//! the captures use `height(ggx, scale=0.02)` whatever the truth's model is). Captures at 256²
+//! model folder with a `height(ggx, …)` estimator (e.g. models/demo): the captures use its
+//! specification, relief scale included, whatever the truth's model is. Captures at 256²
 //! with the field of view 90°, the simulator's geometry (side 2 at flash height 1).
 //!
 //! The error is [`photomat_capture::evaluate::held_out_l1`]: the L1 of display-encoded images
@@ -31,7 +31,6 @@ use photomat_capture::{
     CaptureOptions, GanPrior, PriorOptions, capture, capture_with_prior, new_flash_positions,
 };
 use photomat_core::flash::PHOTO_SIDE;
-use photomat_core::lookup;
 use photomat_core::map_files::load_maps;
 
 const SIZE: usize = 256;
@@ -53,7 +52,13 @@ fn main() -> anyhow::Result<()> {
         .get(3)
         .map_or(Ok(CaptureOptions::default().anchor), |s| s.parse())?;
 
-    let brdf = lookup("height(ggx, scale=0.02)")?;
+    // The model's `height(ggx, …)` estimator sets the relief scale both fits capture in.
+    let brdf = GanPrior::open_all(&model, &Device::Cpu)?
+        .estimators()
+        .iter()
+        .map(|e| e.brdf().clone())
+        .find(|b| b.name().starts_with("height(ggx"))
+        .with_context(|| format!("'{}' has no height(ggx) estimator", model.display()))?;
     let prior = GanPrior::open(&model, &brdf, &Device::Cpu)?
         .with_context(|| format!("'{}' has no estimator for {}", model.display(), brdf.name()))?;
     let record: serde_json::Value =
