@@ -53,14 +53,11 @@ fn main() -> anyhow::Result<()> {
         .map_or(Ok(CaptureOptions::default().anchor), |s| s.parse())?;
 
     // The model's `height(ggx, …)` estimator sets the relief scale both fits capture in.
-    let brdf = GanPrior::open_all(&model, &Device::Cpu)?
-        .estimators()
-        .iter()
-        .map(|e| e.brdf().clone())
-        .find(|b| b.name().starts_with("height(ggx"))
-        .with_context(|| format!("'{}' has no height(ggx) estimator", model.display()))?;
-    let prior = GanPrior::open(&model, &brdf, &Device::Cpu)?
-        .with_context(|| format!("'{}' has no estimator for {}", model.display(), brdf.name()))?;
+    let mut prior = GanPrior::open_all(&model, &Device::Cpu)?;
+    prior.retain_estimators(|b| b.name().starts_with("height(ggx"));
+    let brdf = prior.estimators().first().map(|e| e.brdf().clone());
+    let brdf =
+        brdf.with_context(|| format!("'{}' has no height(ggx) estimator", model.display()))?;
     let record: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(sim.join("simulation.json"))?)?;
     let photos = record["photos"]

@@ -88,8 +88,14 @@ impl GanPrior {
     pub fn open(dir: &Path, brdf: &Brdf, device: &Device) -> anyhow::Result<Option<Self>> {
         let mut prior = Self::open_all(dir, device)?;
         let name = brdf.name();
-        prior.estimators.retain(|e| e.brdf().name() == name);
+        prior.retain_estimators(|b| b.name() == name);
         Ok((!prior.estimators.is_empty()).then_some(prior))
+    }
+
+    /// Keeps only the estimators whose model `keep` accepts (cheapest first still), e.g. a
+    /// model family whatever its arguments: `|b| b.name().starts_with("height(ggx")`.
+    pub fn retain_estimators(&mut self, keep: impl Fn(&Brdf) -> bool) {
+        self.estimators.retain(|e| keep(e.brdf()));
     }
 
     /// Opens the model folder `dir` with every estimator it holds, cheapest first: what
