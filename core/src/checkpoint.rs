@@ -73,6 +73,19 @@ pub fn load_vars_allowing_absent(
     path: &Path,
     optional: impl Fn(&str) -> bool,
 ) -> Result<bool> {
+    load_vars_allowing_new(vars, path, optional, |_| false)
+}
+
+/// [`load_vars_allowing_absent`], and besides the variables whose name `new` accepts may each be
+/// absent from the file, keeping their values: parts added to a model after the file was
+/// written (they are not counted in the `optional` group).
+pub fn load_vars_allowing_new(
+    vars: &VarMap,
+    path: &Path,
+    optional: impl Fn(&str) -> bool,
+    new: impl Fn(&str) -> bool,
+) -> Result<bool> {
+    let optional = |name: &str| optional(name) && !new(name);
     // SAFETY: the file is mapped read-only for the duration of this call; a checkpoint
     // modified concurrently by another process is outside this API's contract (as for
     // candle's own VarMap::load).
@@ -104,7 +117,7 @@ pub fn load_vars_allowing_absent(
         let expected = data[*name].dims();
         match stored.get(*name) {
             // The whole group absent is allowed; a part of it is the problem above.
-            None if optional(name) => {}
+            None if optional(name) || new(name) => {}
             None => problems.push(format!("tensor `{name}` {expected:?} is missing")),
             Some(shape) if shape.as_slice() != expected => problems.push(format!(
                 "tensor `{name}` has shape {shape:?} in the checkpoint, the model expects {expected:?}"

@@ -13,6 +13,7 @@ pub mod highlight;
 pub mod light_following;
 pub mod patch;
 pub mod procedural;
+pub mod relief_signature;
 pub mod sampler;
 pub mod simulator;
 pub mod source;

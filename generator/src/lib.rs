@@ -88,6 +88,7 @@ pub mod model_files;
 pub mod modulated_conv;
 pub mod noise;
 pub mod padding;
+pub mod relief;
 pub mod relight;
 pub mod spatial;
 pub mod swd;
@@ -215,6 +216,10 @@ pub struct GeneratorConfig {
     /// first layer. 0 (the default, and older files, where it is absent) is StyleGAN2's D.
     #[serde(default, skip_serializing_if = "is_zero")]
     pub d_input_sharpen: f64,
+    /// M shades each texel in the frame of a normal from a learned height channel of F
+    /// ([`relief`]). False (the default, and older files, where it is absent) is the paper's M.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub relief: bool,
 }
 
 /// Whether a gain is 0 (then `gan.json` omits it).
@@ -252,6 +257,7 @@ impl Default for GeneratorConfig {
             spatial: None,
             noise_inputs: true,
             d_input_sharpen: 0.0,
+            relief: false,
         }
     }
 }

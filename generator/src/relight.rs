@@ -26,7 +26,12 @@
 //! so that following the light is a linear readout from the first layer on. ω_z ∈ (0, 1]
 //! (the flash is above the plane), so every power is finite and in (0, 1].
 //!
-//! Parameter names under `vb`: `fc{i}.weight`, `fc{i}.bias`, i = 0 … 7.
+//! # Relief
+//! With `relief` on, M reads ω in the frame of a normal derived from a learned height channel
+//! of F instead of ω itself ([`crate::relief`]).
+//!
+//! Parameter names under `vb`: `fc{i}.weight`, `fc{i}.bias`, i = 0 … 7, and `relief.weight`
+//! with relief on.
 
 use candle_core::{Result, Tensor, bail};
 use candle_nn::VarBuilder;
@@ -34,6 +39,7 @@ use candle_nn::VarBuilder;
 use crate::GeneratorConfig;
 use crate::activation::{LRELU_GAIN, LRELU_SLOPE};
 use crate::equalized::{EqualizedLinear, LinearConfig, equalized_linear};
+use crate::relief::{Edges, Relief};
 
 /// Channels of the per-texel light direction ω.
 pub const OMEGA_CHANNELS: usize = 3;
@@ -62,6 +68,7 @@ pub struct Relight {
     layers: Vec<EqualizedLinear>,
     feature_channels: usize,
     lobes: Vec<f64>,
+    relief: Option<Relief>,
 }
 
 /// Default lobe exponents of new runs ([`crate::GeneratorConfig::relight_lobes`]; module
@@ -93,10 +100,20 @@ impl Relight {
                 equalized_linear(fan_in, fan_out, layer_cfg, vb.pp(format!("fc{i}")))
             })
             .collect::<Result<Vec<_>>>()?;
+        let relief = if cfg.relief {
+            Some(Relief::new(
+                cfg.feature_channels,
+                cfg.relight_lr_multiplier,
+                vb.pp("relief"),
+            )?)
+        } else {
+            None
+        };
         Ok(Self {
             layers,
             feature_channels: cfg.feature_channels,
             lobes: cfg.relight_lobes.clone(),
+            relief,
         })
     }
 
@@ -158,12 +175,35 @@ impl Relight {
         Ok(x)
     }
 
-    /// Relights the neural material `features` under the per-texel light directions `omega`
-    /// (e.g. `photomat_core::FlashGeometry::omega`).
+    /// The relief's height projection, when M has one ([`crate::relief`]).
+    pub fn relief(&self) -> Option<&Relief> {
+        self.relief.as_ref()
+    }
+
+    /// Relights the neural material `features` — a whole, periodic material — under the
+    /// per-texel light directions `omega` (e.g. `photomat_core::FlashGeometry::omega`).
     ///
     /// # Shapes
     /// features (B, feature_channels, H, W), omega (B, 3, H, W) → (B, 3, H, W).
     pub fn forward(&self, features: &Tensor, omega: &Tensor) -> Result<Tensor> {
+        self.forward_with_edges(features, omega, Edges::Wrap)
+    }
+
+    /// [`Self::forward`] on a window cut from a larger feature field (the spatial trainer's
+    /// patches): the relief's differences do not wrap across the window's border.
+    ///
+    /// # Shapes
+    /// features (B, feature_channels, H, W), omega (B, 3, H, W) → (B, 3, H, W).
+    pub fn forward_window(&self, features: &Tensor, omega: &Tensor) -> Result<Tensor> {
+        self.forward_with_edges(features, omega, Edges::Clamp)
+    }
+
+    fn forward_with_edges(
+        &self,
+        features: &Tensor,
+        omega: &Tensor,
+        edges: Edges,
+    ) -> Result<Tensor> {
         let (b, c, h, w) = features.dims4()?;
         if c != self.feature_channels {
             bail!(
@@ -178,7 +218,10 @@ impl Relight {
                 features.dims()
             );
         }
-        let light = self.light_input(omega)?;
+        let light = match &self.relief {
+            Some(relief) => self.light_input(&relief.local_omega(features, omega, edges)?)?,
+            None => self.light_input(omega)?,
+        };
         if let Some(layers) = self.fused_layers() {
             return photomat_kernels::per_texel_mlp(features, &light, &layers, ACTIVATION);
         }

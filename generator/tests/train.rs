@@ -316,3 +316,73 @@ fn a_skipped_update_is_logged_and_never_checkpointed() -> Result<()> {
     assert_eq!(resumed.steps_done(), 1);
     Ok(())
 }
+
+#[test]
+fn relief_switched_on_at_a_resume_starts_at_zero_and_then_trains() -> Result<()> {
+    second_order();
+    let dir = tempfile::tempdir()?;
+    let data_dir = simulated_dataset(dir.path(), 8, 3)?;
+    let data = DatasetSource::open(&data_dir, 32)?;
+    let config = tiny_config(&data_dir, true);
+    let run = dir.path().join("run");
+    let mut first = Trainer::new(config.clone(), &Device::Cpu)?;
+    for _ in 0..2 {
+        first.step(&data)?;
+    }
+    first.save_state(&run)?;
+
+    // The full state (optimisers included) lacks M's relief projection and its moments.
+    let mut with_relief = config.clone();
+    with_relief.generator.relief = true;
+    let mut resumed = Trainer::new(with_relief.clone(), &Device::Cpu)?;
+    assert_eq!(resumed.load_state(&run)?, Restored::Exactly);
+    let (before, after) = (snapshot(first.state_vars()), snapshot(resumed.state_vars()));
+    let relief: Vec<_> = after
+        .iter()
+        .filter(|(n, _)| n.contains("m.relief."))
+        .collect();
+    assert!(!relief.is_empty());
+    for (name, values) in &relief {
+        assert!(
+            values.iter().all(|v| *v == 0.0),
+            "`{name}` does not start at zero"
+        );
+    }
+    let saved: std::collections::HashMap<_, _> = before.into_iter().collect();
+    for (name, values) in after.iter().filter(|(n, _)| !n.contains("m.relief.")) {
+        if name != "trainer.counters" {
+            assert!(
+                &saved[name] == values,
+                "`{name}` differs from the saved run's"
+            );
+        }
+    }
+    // Zero relief: M relights exactly as before.
+    let features = first.model().features_for_seeds(&[5], 1.0)?;
+    let omega = photomat_core::FlashGeometry::new(
+        &[photomat_core::Highlight { x: 0.1, y: -0.2 }],
+        32,
+        candle_core::DType::F32,
+        &Device::Cpu,
+    )?
+    .omega;
+    let a = first.model().relight().forward(&features, &omega)?;
+    let b = resumed.model().relight().forward(&features, &omega)?;
+    assert_eq!((a - b)?.abs()?.max_all()?.to_scalar::<f32>()?, 0.0);
+
+    // The projection trains, and a run with relief cannot resume without it.
+    for _ in 0..2 {
+        resumed.step(&data)?;
+    }
+    let weight = snapshot(resumed.state_vars())
+        .into_iter()
+        .find(|(n, _)| n == "m.relief.weight")
+        .expect("relief weight")
+        .1;
+    assert!(weight.iter().any(|v| *v != 0.0));
+    resumed.save_state(&run)?;
+    let mut without = Trainer::new(config, &Device::Cpu)?;
+    let err = without.load_state(&run).err().unwrap().to_string();
+    assert!(err.contains("relief"), "{err}");
+    Ok(())
+}

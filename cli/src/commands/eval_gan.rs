@@ -14,7 +14,10 @@
 //! For a spatial model the reals are native-scale patches (as in its training), and the
 //! command also reports whether M follows the light ([`photomat_data::light_following`]):
 //! the highlight detector's distance to the conditioned highlight on M's images and on real
-//! patches, in % of the width.
+//! patches, in % of the width; and whether M's relighting shows relief
+//! ([`photomat_data::relief_signature`]): of the detail in the log-ratio of each material
+//! under two opposite lights, the share (window R²) that follows the texture's derivative
+//! along the lights' axis (relief), across it (the control) and the texture itself.
 //!
 //! With `--discriminator` (RUN must be a `photomat train-gan` run folder, which holds D) it also
 //! reports what D looks at ([`photomat_data::discriminator_probe`]): D's mean logit on reals,
@@ -30,6 +33,7 @@ use photomat_data::discriminator_probe::{BLUR_RADII, DiscriminatorProbe, probe_d
 use photomat_data::highlight::DetectorKind;
 use photomat_data::light_following::{LightFollowing, light_following};
 use photomat_data::patch::PatchOptions;
+use photomat_data::relief_signature::{ReliefSignature, model_relief_signature};
 use photomat_data::source::DatasetSource;
 use photomat_generator::GanModel;
 use photomat_generator::swd::{EvalPhase, FakeWindows, SwdConfig, SwdReport, model_swd};
@@ -176,6 +180,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             )
         }
     };
+    let relief = following
+        .as_ref()
+        .map(|f| model_relief_signature(&model, f.photo_size, count, args.seed))
+        .transpose()
+        .context("cannot measure whether the relighting shows relief")?;
     let probe = args
         .discriminator
         .then(|| probe_discriminator(&args.gan, Some(&args.data), count, args.seed))
@@ -192,7 +201,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         args,
         (resolution, window),
         &report,
-        following.as_ref(),
+        (following.as_ref(), relief.as_ref()),
         probe.as_ref(),
         seconds,
         out,
@@ -200,12 +209,13 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
 }
 
 /// The measurement as JSON (`--json`) or as a table; `resolution` is the model's side,
-/// `window` the side of the compared images.
+/// `window` the side of the compared images; the light-following and relief checks are those
+/// of a spatial model.
 fn print_report(
     args: &Args,
     (resolution, window): (usize, usize),
     report: &SwdReport,
-    following: Option<&LightFollowing>,
+    (following, relief): (Option<&LightFollowing>, Option<&ReliefSignature>),
     probe: Option<&DiscriminatorProbe>,
     seconds: f64,
     out: &mut dyn Write,
@@ -229,6 +239,7 @@ fn print_report(
             "levels": levels,
             "mean_x1e3": report.mean,
             "light_following_pct_of_width": following,
+            "relief_signature": relief,
             "discriminator": probe,
             "seconds": seconds,
         });
@@ -285,6 +296,18 @@ fn print_report(
              detector's own error is below 1 %; centre: always guessing the centre there)",
             s = f.photo_size
         )?;
+    }
+    if let Some(r) = relief {
+        writeln!(
+            out,
+            "relief: R² of the detail of log(image under +y light / under −y light) with the \
+             texture's derivative along y {:.3} (relief), along x {:.3} (control), the texture \
+             itself {:.3} ({count} materials at the photos' scale)",
+            r.along, r.across, r.texture
+        )?;
+        if let Some(degrees) = r.m_relief_rms_degrees {
+            writeln!(out, "M's own relief normals: {degrees:.2}° rms from +z")?;
+        }
     }
     if let Some(p) = probe {
         writeln!(

@@ -141,6 +141,13 @@ pub struct Args {
     #[arg(long, value_name = "K")]
     pub d_sharpen: Option<f64>,
 
+    /// Relief in the neural material: M shades each texel in the frame of a normal from a
+    /// learned height channel of F, so that the light dependence M learns can be relief that
+    /// the estimator's normals then show. May be switched on when resuming a run without it
+    /// (its projection starts at zero: outputs unchanged until it trains).
+    #[arg(long)]
+    pub relief: bool,
+
     /// Channels of the spatial generator's local latents (one vector per size/4 cell)
     /// [default: 32].
     #[arg(long, value_name = "N", requires = "spatial",
@@ -219,6 +226,7 @@ impl Args {
             relight_lobes: self.relight_lobes.clone().map(|l| l.0),
             no_noise: self.no_noise,
             d_sharpen: self.d_sharpen,
+            relief: self.relief,
             checkpoint_every: self.checkpoint_every,
             sample_every: self.sample_every,
             swd_every: self.swd_every,

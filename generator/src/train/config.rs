@@ -184,10 +184,15 @@ impl TrainConfig {
     /// diverged run recommends lowering; `log.csv` records it per step) and the cadence of
     /// outputs. Everything else must stay as saved for the run to continue the same training.
     pub fn with_resume_changes(&self, requested: &TrainConfig) -> TrainConfig {
+        let mut generator = self.generator.clone();
+        // Relief may be switched on for a run without it: M's height projection starts at
+        // zero, which leaves every output unchanged (`crate::relief`); never off again.
+        generator.relief |= requested.generator.relief;
         TrainConfig {
             data: requested.data.clone(),
             lr: requested.lr,
             cadence: requested.cadence,
+            generator,
             ..self.clone()
         }
     }

@@ -92,6 +92,9 @@ pub struct GanSettings {
     pub no_noise: bool,
     /// Gain of D's input sharpening ([`GeneratorConfig::d_input_sharpen`]).
     pub d_sharpen: Option<f64>,
+    /// M shades in the frame of a learned relief ([`GeneratorConfig::relief`]; `false`: not
+    /// asked for). A resume may switch it on for a run without it.
+    pub relief: bool,
     /// Steps between checkpoints ([`Cadence::checkpoint_every`]).
     pub checkpoint_every: Option<u64>,
     /// Steps between sample grids ([`Cadence::sample_every`]).
@@ -604,6 +607,7 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
         // A spatial G is translation-equivariant only with wrap-around padding.
         tileable: settings.tileable || settings.spatial,
         noise_inputs: !settings.no_noise,
+        relief: settings.relief,
         d_input_sharpen: settings.d_sharpen.unwrap_or(defaults.d_input_sharpen),
         spatial,
         latent_dim: settings.latent_dim.unwrap_or(defaults.latent_dim),
@@ -675,6 +679,14 @@ fn resumed_config(run: &Path, settings: &GanSettings) -> anyhow::Result<RunPlan>
             run.join(CONFIG_FILE).display(),
             conflicts.join("; ")
         );
+    }
+    if settings.relief && !saved.generator.relief {
+        notes.push(
+            "note: relief switched on: M's height projection starts at zero, so the model's \
+             outputs are unchanged until it trains"
+                .to_string(),
+        );
+        saved.generator.relief = true;
     }
     if let Some(lr) = settings.lr
         && lr != saved.lr

@@ -36,6 +36,9 @@ pub const CONFIG_FILE: &str = "train.json";
 /// Name prefixes of the optimisers' tensors in [`STATE_FILE`].
 pub const OPTIMISER_PREFIXES: [&str; 2] = ["opt_g.", "opt_d."];
 
+/// What names M's relief projection in [`STATE_FILE`] (`m.relief.weight` and its moments).
+const RELIEF_PARAMETER: &str = "m.relief.";
+
 fn is_optimiser(name: &str) -> bool {
     OPTIMISER_PREFIXES.iter().any(|p| name.starts_with(p))
 }
@@ -141,9 +144,14 @@ pub fn load_state(dir: &Path, state: &VarMap, config: &TrainConfig) -> Result<Re
         );
     }
     let path: PathBuf = dir.join(STATE_FILE);
+    // Relief switched on at this resume: its projection (and its moments) are not in the file
+    // and keep their zero start.
+    let relief_added = config.generator.relief && !saved.generator.relief;
     let optimisers_absent =
-        photomat_core::checkpoint::load_vars_allowing_absent(state, &path, is_optimiser)
-            .map_err(candle_core::Error::wrap)?;
+        photomat_core::checkpoint::load_vars_allowing_new(state, &path, is_optimiser, |name| {
+            relief_added && name.contains(RELIEF_PARAMETER)
+        })
+        .map_err(candle_core::Error::wrap)?;
     Ok(if optimisers_absent {
         Restored::WithFreshOptimisers
     } else {

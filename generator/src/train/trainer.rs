@@ -375,7 +375,9 @@ impl Trainer {
         if let Some(u) = ws_offset {
             ws = (ws + u)?;
         }
-        let features = match &self.config.patches {
+        // Whether F is one whole period of a material (a rolled tileable sample) or a window of
+        // a larger field / a non-periodic image: the relief's differences wrap only in the first.
+        let (features, whole_period) = match &self.config.patches {
             None => {
                 let noise_images = self
                     .model
@@ -385,9 +387,9 @@ impl Trainer {
                     .forward(&ws, &NoiseInput::Given(&noise_images))?;
                 if cfg.tileable {
                     let offsets = roll_offsets(&stream_seeds(seed, step, roll, b), cfg.resolution);
-                    roll_per_sample(&features, &offsets)?
+                    (roll_per_sample(&features, &offsets)?, true)
                 } else {
-                    features
+                    (features, false)
                 }
             }
             Some(patches) => {
@@ -404,12 +406,19 @@ impl Trainer {
                     g.synthesis()
                         .forward_field(&fields, &ws, &NoiseInput::Given(&noise_images))?;
                 let offsets = roll_offsets(&stream_seeds(seed, step, roll, b), side);
-                window_per_sample(&features, &offsets, (cfg.resolution, cfg.resolution))?
+                (
+                    window_per_sample(&features, &offsets, (cfg.resolution, cfg.resolution))?,
+                    false,
+                )
             }
         };
         let placements = data.fake_lights(b, stream_seed(seed, step, lights, 0))?;
         let omega = omega_for_placements(&placements, cfg.resolution, &self.device)?;
-        let images = self.model.relight().forward(&features, &omega)?;
+        let images = if whole_period {
+            self.model.relight().forward(&features, &omega)?
+        } else {
+            self.model.relight().forward_window(&features, &omega)?
+        };
         Ok(Fakes { images, omega, w })
     }
 
