@@ -12,26 +12,11 @@
 use candle_core::Device;
 use photomat_brdfs as _; // link the built-in BRDF plugins
 use photomat_core::image_io::PlanarImage;
-use photomat_core::{MaterialMaps, lookup, render};
+use photomat_core::{lookup, render};
 use photomat_data::procedural::families;
-use photomat_data::relief_signature::{ReliefSignature, relief_signature, signature_lights};
-
-/// `maps` without relief: a +z normal map, or a flat height map (whichever the model takes).
-fn flattened(maps: &MaterialMaps) -> photomat_core::Result<MaterialMaps> {
-    let mut flat = maps.clone();
-    for name in ["normal", "height"] {
-        if let Ok(map) = maps.get(name) {
-            let replacement = if name == "normal" {
-                let z = map.narrow(1, 2, 1)?.ones_like()?;
-                candle_core::Tensor::cat(&[z.zeros_like()?, z.zeros_like()?, z], 1)?
-            } else {
-                map.ones_like()?.affine(0.5, 0.0)?
-            };
-            flat.insert(name, replacement);
-        }
-    }
-    Ok(flat)
-}
+use photomat_data::relief_signature::{
+    ReliefSignature, relief_signature, signature_lights, without_relief,
+};
 
 fn main() -> photomat_core::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -59,7 +44,7 @@ fn main() -> photomat_core::Result<()> {
         let mut sums = [ReliefSignature::default(); 2];
         for seed in 0..seeds {
             let maps = family.generate(size, seed, &device)?;
-            for (sum, maps) in sums.iter_mut().zip([maps.clone(), flattened(&maps)?]) {
+            for (sum, maps) in sums.iter_mut().zip([maps.clone(), without_relief(&maps)?]) {
                 let images = render(brdf.as_ref(), &maps, &lights)?;
                 let tiles = PlanarImage::batch_from_tensor(&images)?;
                 let s = relief_signature(&tiles[0], &tiles[1])?;

@@ -20,10 +20,10 @@
 //! sign of a contrast change flips between the halves nearer either light, which a global
 //! correlation would cancel.
 
-use candle_core::DType;
+use candle_core::{DType, Tensor};
 use photomat_core::flash::FlashGeometry;
 use photomat_core::image_io::PlanarImage;
-use photomat_core::{Error, Highlight, Result};
+use photomat_core::{Error, Highlight, MaterialMaps, Result};
 use photomat_generator::GanModel;
 use photomat_generator::relief::{self, Edges};
 use photomat_generator::train::samples::display_tiles;
@@ -224,6 +224,23 @@ pub fn relief_signature(lit_up: &PlanarImage, lit_down: &PlanarImage) -> Result<
         across: sum.across / n,
         m_relief_rms_degrees: None,
     })
+}
+
+/// `maps` without relief: a +z normal map, or a flat height map (whichever the model takes);
+/// every other map unchanged.
+pub fn without_relief(maps: &MaterialMaps) -> Result<MaterialMaps> {
+    let mut flat = maps.clone();
+    if let Ok(normal) = maps.get("normal") {
+        let z = normal.narrow(1, 2, 1)?.ones_like()?;
+        flat.insert(
+            "normal",
+            Tensor::cat(&[z.zeros_like()?, z.zeros_like()?, z], 1)?,
+        );
+    }
+    if let Ok(height) = maps.get("height") {
+        flat.insert("height", height.ones_like()?.affine(0.5, 0.0)?);
+    }
+    Ok(flat)
 }
 
 /// The two lights of a signature on a material of side `side` world units: highlights at
