@@ -5,11 +5,11 @@
 //! light to its neighbours', so relief — a field of tilted normals, whose shading under a moved
 //! light follows the height's derivative along the light's motion — is one of many per-texel
 //! light dependences M may learn, and at CPU scale it learns none: in the bundled model's
-//! renders under two lights the log-ratio's detail is explained by the texture itself (window
-//! R² 0.08–0.66), not by its derivative along the light's axis (R² ≤ 0.03, as along the other
-//! axis), while the simulator's photos of leather, paint and tiles show R² 0.2–0.5 for that
-//! derivative (`docs/benchmarks.md`, "Does M's relighting show relief?"). An estimator fitted
-//! to such renders rightly keeps its normals flat.
+//! renders under two lights the log-ratio's detail follows the texture itself (window R² 0.33),
+//! not its derivative along the lights' axis (0.009, against 0.012 across it), while the
+//! simulator's photos of fabric, leather, paint, stone and tiles give 0.18–0.50 along
+//! (`docs/benchmarks.md`, "Does M's relighting show relief?"). An estimator fitted to such
+//! renders rightly keeps its normals flat.
 //!
 //! With relief on, a zero-initialised linear projection of the features gives a height
 //! `h = Σ_c a_c F_c` (in texels); its central differences give the normal
