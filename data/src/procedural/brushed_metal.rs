@@ -15,13 +15,11 @@
 //! Per seed: the metal, brushing direction (0°, 45°, 90°, 135°), groove density, roughness,
 //! band contrast, scratch density, grime.
 
-use candle_core::Device;
-use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::Family;
-use super::common::{GgxTexel, Pattern, Streaks, counts, sample_maps, scale, smoothstep};
+use super::PatternFamily;
+use super::common::{GgxTexel, Pattern, Streaks, counts, scale, smoothstep};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the brushed-metal family; every field has a documented default.
@@ -58,7 +56,7 @@ const METALS: [[f64; 3]; 9] = [
 ];
 
 /// One member of the family.
-struct Sheet {
+pub(crate) struct Sheet {
     f0: [f64; 3],
     streaks: Streaks,
     grooves: u32,
@@ -71,7 +69,14 @@ struct Sheet {
     noise: [PeriodicNoise; 4],
 }
 
-impl BrushedMetal {
+impl PatternFamily for BrushedMetal {
+    const NAME: &'static str = "brushed_metal";
+    type Member = Sheet;
+
+    fn brdf(&self) -> String {
+        format!("height(ggx, scale={})", self.relief)
+    }
+
     fn member(&self, seed: u64) -> Sheet {
         let mut rng = StdRng::seed_from_u64(seed);
         let f0 = METALS[rng.random_range(0..METALS.len())];
@@ -111,31 +116,10 @@ impl Pattern for Sheet {
     }
 }
 
-impl Family for BrushedMetal {
-    fn name(&self) -> &'static str {
-        "brushed_metal"
-    }
-
-    fn brdf(&self) -> String {
-        format!("height(ggx, scale={})", self.relief)
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
-        sample_maps(&self.member(seed), size, device)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::procedural::common::testing::{assert_periodic, channel_stats};
-
-    #[test]
-    fn brushed_metal_is_periodic() {
-        for seed in 0..6 {
-            assert_periodic(&BrushedMetal::default().member(seed));
-        }
-    }
+    use crate::procedural::common::testing::channel_stats;
 
     #[test]
     fn brushed_metal_is_a_metal() {

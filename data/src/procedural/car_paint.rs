@@ -15,14 +15,12 @@
 //! Per seed: kind (metallic 60 %, pearl 20 %, solid 20 %), hue, saturation and lightness,
 //! flake tint, flake density and sparkle, flake-lobe roughness, clear-coat gloss.
 
-use candle_core::Device;
-use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::Family;
+use super::PatternFamily;
 use super::cellular::PeriodicCells;
-use super::common::{CoatedTexel, Pattern, counts, hsv, sample_maps, scale, srgb};
+use super::common::{CoatedTexel, Pattern, counts, hsv, scale, srgb};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the car-paint family; every field has a documented default.
@@ -40,7 +38,7 @@ impl Default for CarPaint {
 }
 
 /// One member of the family.
-struct Panel {
+pub(crate) struct Panel {
     pigment: [f64; 3],
     /// Mean flake F0, linear rgb.
     flake: [f64; 3],
@@ -55,7 +53,14 @@ struct Panel {
     noise: PeriodicNoise,
 }
 
-impl CarPaint {
+impl PatternFamily for CarPaint {
+    const NAME: &'static str = "car_paint";
+    type Member = Panel;
+
+    fn brdf(&self) -> String {
+        "coated".into()
+    }
+
     fn member(&self, seed: u64) -> Panel {
         let mut rng = StdRng::seed_from_u64(seed);
         let hue = rng.random_range(0.0..1.0);
@@ -123,31 +128,10 @@ impl Pattern for Panel {
     }
 }
 
-impl Family for CarPaint {
-    fn name(&self) -> &'static str {
-        "car_paint"
-    }
-
-    fn brdf(&self) -> String {
-        "coated".into()
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
-        sample_maps(&self.member(seed), size, device)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::procedural::common::testing::{assert_periodic, channel_stats};
-
-    #[test]
-    fn car_paint_is_periodic() {
-        for seed in 0..6 {
-            assert_periodic(&CarPaint::default().member(seed));
-        }
-    }
+    use crate::procedural::common::testing::channel_stats;
 
     #[test]
     fn car_paint_has_a_sharp_clear_coat_over_a_broad_flake_lobe() {

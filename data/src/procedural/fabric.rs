@@ -15,15 +15,12 @@
 //! denim: indigo warp on white weft, two-tone, heathered), per-thread colour variation,
 //! twist, roughness, orientation (one of the 8 symmetries of the square).
 
-use candle_core::Device;
-use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::Family;
+use super::PatternFamily;
 use super::common::{
-    GgxTexel, Pattern, Symmetry, counts, hsv, jitter, mix, sample_maps, scale, smoothstep, srgb,
-    wrap01,
+    GgxTexel, Pattern, Symmetry, counts, hsv, jitter, mix, scale, smoothstep, srgb, wrap01,
 };
 use super::noise::{PeriodicNoise, mix64, unit_f64};
 
@@ -87,7 +84,7 @@ const GAP_HEIGHT: f64 = 0.05;
 const GAP_SHADE: f64 = 0.15;
 
 /// One member of the family.
-struct Cloth {
+pub(crate) struct Cloth {
     weave: Weave,
     threads: u32,
     symmetry: Symmetry,
@@ -107,7 +104,14 @@ struct Cloth {
     noise: PeriodicNoise,
 }
 
-impl Fabric {
+impl PatternFamily for Fabric {
+    const NAME: &'static str = "fabric";
+    type Member = Cloth;
+
+    fn brdf(&self) -> String {
+        format!("height(ggx, scale={})", self.relief)
+    }
+
     fn member(&self, seed: u64) -> Cloth {
         let mut rng = StdRng::seed_from_u64(seed);
         let weave = match rng.random_range(0..5) {
@@ -262,31 +266,10 @@ impl Pattern for Cloth {
     }
 }
 
-impl Family for Fabric {
-    fn name(&self) -> &'static str {
-        "fabric"
-    }
-
-    fn brdf(&self) -> String {
-        format!("height(ggx, scale={})", self.relief)
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
-        sample_maps(&self.member(seed), size, device)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::procedural::common::testing::{assert_periodic, channel_stats};
-
-    #[test]
-    fn fabric_is_periodic() {
-        for seed in 0..8 {
-            assert_periodic(&Fabric::default().member(seed));
-        }
-    }
+    use crate::procedural::common::testing::channel_stats;
 
     #[test]
     fn fabric_thread_count_holds_whole_repeats() {

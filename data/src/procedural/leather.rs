@@ -13,16 +13,12 @@
 //! grain size and irregularity, crease width and depth, wrinkle strength and direction,
 //! finish roughness, mottling.
 
-use candle_core::Device;
-use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::Family;
+use super::PatternFamily;
 use super::cellular::{CellSample, PeriodicCells};
-use super::common::{
-    GgxTexel, Pattern, Symmetry, counts, jitter, sample_maps, scale, smoothstep, srgb,
-};
+use super::common::{GgxTexel, Pattern, Symmetry, counts, jitter, scale, smoothstep, srgb};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the leather family; every field has a documented default.
@@ -58,7 +54,7 @@ const DYES: [[f64; 3]; 9] = [
 ];
 
 /// One member of the family.
-struct Hide {
+pub(crate) struct Hide {
     dye: [f64; 3],
     cells: PeriodicCells,
     period: u32,
@@ -76,7 +72,14 @@ struct Hide {
     noise: [PeriodicNoise; 3],
 }
 
-impl Leather {
+impl PatternFamily for Leather {
+    const NAME: &'static str = "leather";
+    type Member = Hide;
+
+    fn brdf(&self) -> String {
+        format!("height(ggx, scale={})", self.relief)
+    }
+
     fn member(&self, seed: u64) -> Hide {
         let mut rng = StdRng::seed_from_u64(seed);
         let dye = DYES[rng.random_range(0..DYES.len())];
@@ -135,31 +138,10 @@ impl Pattern for Hide {
     }
 }
 
-impl Family for Leather {
-    fn name(&self) -> &'static str {
-        "leather"
-    }
-
-    fn brdf(&self) -> String {
-        format!("height(ggx, scale={})", self.relief)
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
-        sample_maps(&self.member(seed), size, device)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::procedural::common::testing::{assert_periodic, channel_stats};
-
-    #[test]
-    fn leather_is_periodic() {
-        for seed in 0..6 {
-            assert_periodic(&Leather::default().member(seed));
-        }
-    }
+    use crate::procedural::common::testing::channel_stats;
 
     #[test]
     fn leather_is_a_finished_dielectric() {

@@ -18,6 +18,11 @@
 //!
 //! (Scales are the defaults of each family's configuration.) [`families`] lists them all,
 //! [`family`] finds one by name.
+//!
+//! A family is one file: a configuration struct, the member a seed draws (a [`Pattern`] of
+//! texture coordinates, [`common`]) and one `PatternFamily` impl giving its name, its BRDF and
+//! how a seed draws a member; [`Family`] follows from that impl, and the family's entry in
+//! [`families`] makes it known to the simulator and the CLI.
 
 mod brushed_metal;
 mod car_paint;
@@ -45,6 +50,8 @@ pub use wood::Wood;
 use candle_core::Device;
 use photomat_core::{Error, MaterialMaps, Result};
 
+use common::Pattern;
+
 /// A family of procedural materials.
 ///
 /// `Send + Sync` so a simulator can generate members on several threads.
@@ -57,6 +64,36 @@ pub trait Family: Send + Sync {
 
     /// Maps (1, C, size, size), f32, for material number `seed` of the family.
     fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps>;
+}
+
+/// A family whose members are [`Pattern`]s drawn from a seed, which is how every built-in
+/// family is written: [`Family`] follows from it, its maps being the member sampled at the
+/// texel centres ([`common::sample_maps`]).
+pub(crate) trait PatternFamily: Send + Sync {
+    /// The family's name ([`Family::name`]).
+    const NAME: &'static str;
+    /// What one seed draws: a material as a function of texture coordinates.
+    type Member: Pattern;
+
+    /// Canonical BRDF specification the maps are made for ([`Family::brdf`]).
+    fn brdf(&self) -> String;
+
+    /// Member number `seed` of the family (colours, scales, orientation).
+    fn member(&self, seed: u64) -> Self::Member;
+}
+
+impl<F: PatternFamily> Family for F {
+    fn name(&self) -> &'static str {
+        F::NAME
+    }
+
+    fn brdf(&self) -> String {
+        PatternFamily::brdf(self)
+    }
+
+    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
+        common::sample_maps(&self.member(seed), size, device)
+    }
 }
 
 /// Every family with its default configuration, sorted by name.
@@ -89,4 +126,29 @@ pub fn family(name: &str) -> Result<Box<dyn Family>> {
                 family_names().join(", ")
             ))
         })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use common::testing::assert_periodic;
+
+    /// Members of `family` for seeds 0..8 are periodic with period 1 in u and v.
+    fn assert_members_periodic<F: PatternFamily>(family: F) {
+        for seed in 0..8 {
+            assert_periodic(&family.member(seed));
+        }
+    }
+
+    #[test]
+    fn every_family_is_periodic() {
+        assert_members_periodic(BrushedMetal::default());
+        assert_members_periodic(CarPaint::default());
+        assert_members_periodic(Fabric::default());
+        assert_members_periodic(Leather::default());
+        assert_members_periodic(Paint::default());
+        assert_members_periodic(Stone::default());
+        assert_members_periodic(GlazedTiles::default());
+        assert_members_periodic(Wood::default());
+    }
 }

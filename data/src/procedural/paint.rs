@@ -18,15 +18,11 @@
 //! (0°, 45°, 90°, 135°), lane width and wobble, stroke length, bristle density, ridge
 //! strength, dry brushing, primer grey, substrate unevenness.
 
-use candle_core::Device;
-use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::Family;
-use super::common::{
-    GgxTexel, Pattern, Streaks, counts, hsv, mix, sample_maps, scale, smoothstep, srgb,
-};
+use super::PatternFamily;
+use super::common::{GgxTexel, Pattern, Streaks, counts, hsv, mix, scale, smoothstep, srgb};
 use super::noise::{PeriodicNoise, mix64, unit_f64};
 
 /// Configuration of the paint family; every field has a documented default.
@@ -52,7 +48,7 @@ impl Default for Paint {
 const FINISHES: [(f64, f64); 4] = [(0.55, 0.75), (0.38, 0.5), (0.25, 0.38), (0.1, 0.22)];
 
 /// One member of the family.
-struct Coat {
+pub(crate) struct Coat {
     colour: [f64; 3],
     streaks: Streaks,
     lanes: u32,
@@ -73,7 +69,14 @@ struct Coat {
     noise: [PeriodicNoise; 3],
 }
 
-impl Paint {
+impl PatternFamily for Paint {
+    const NAME: &'static str = "paint";
+    type Member = Coat;
+
+    fn brdf(&self) -> String {
+        format!("height(ggx, scale={})", self.relief)
+    }
+
     fn member(&self, seed: u64) -> Coat {
         let mut rng = StdRng::seed_from_u64(seed);
         // Greys half as often as colours; values kept off pure black and white.
@@ -190,31 +193,10 @@ impl Pattern for Coat {
     }
 }
 
-impl Family for Paint {
-    fn name(&self) -> &'static str {
-        "paint"
-    }
-
-    fn brdf(&self) -> String {
-        format!("height(ggx, scale={})", self.relief)
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
-        sample_maps(&self.member(seed), size, device)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::procedural::common::testing::{assert_periodic, channel_stats};
-
-    #[test]
-    fn paint_is_periodic() {
-        for seed in 0..6 {
-            assert_periodic(&Paint::default().member(seed));
-        }
-    }
+    use crate::procedural::common::testing::channel_stats;
 
     #[test]
     fn paint_is_a_dielectric_with_slight_gloss_variation() {

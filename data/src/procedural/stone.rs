@@ -15,16 +15,12 @@
 //! contrast, grain size, finish, layer count, relief strength, orientation (one of the 8
 //! symmetries of the square).
 
-use candle_core::Device;
-use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::Family;
+use super::PatternFamily;
 use super::cellular::PeriodicCells;
-use super::common::{
-    GgxTexel, Pattern, Symmetry, counts, jitter, mix, sample_maps, scale, smoothstep, srgb,
-};
+use super::common::{GgxTexel, Pattern, Symmetry, counts, jitter, mix, scale, smoothstep, srgb};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the stone family; every field has a documented default.
@@ -135,7 +131,7 @@ enum Kind {
 }
 
 /// One member of the family.
-struct Slab {
+pub(crate) struct Slab {
     kind: Kind,
     symmetry: Symmetry,
     /// Base roughness of the finish.
@@ -144,7 +140,14 @@ struct Slab {
     noise: [PeriodicNoise; 4],
 }
 
-impl Stone {
+impl PatternFamily for Stone {
+    const NAME: &'static str = "stone";
+    type Member = Slab;
+
+    fn brdf(&self) -> String {
+        format!("height(ggx, scale={})", self.relief)
+    }
+
     fn member(&self, seed: u64) -> Slab {
         let mut rng = StdRng::seed_from_u64(seed);
         let noise = [(); 4].map(|_| PeriodicNoise::new(rng.random()));
@@ -301,20 +304,6 @@ impl Pattern for Slab {
             roughness,
             height,
         }
-    }
-}
-
-impl Family for Stone {
-    fn name(&self) -> &'static str {
-        "stone"
-    }
-
-    fn brdf(&self) -> String {
-        format!("height(ggx, scale={})", self.relief)
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
-        sample_maps(&self.member(seed), size, device)
     }
 }
 

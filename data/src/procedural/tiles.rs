@@ -4,13 +4,11 @@
 //! Maps for `height(ggx)`: diffuse, specular, roughness, height. Exactly periodic on the unit
 //! square (integer tile count, periodic noise), so the material tiles seamlessly.
 
-use candle_core::Device;
-use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::Family;
-use super::common::{GgxTexel, Pattern, sample_maps, smoothstep, wrap01};
+use super::PatternFamily;
+use super::common::{GgxTexel, Pattern, smoothstep, wrap01};
 use super::noise::PeriodicNoise;
 
 /// Configuration of the tile family; every field has a documented default.
@@ -38,7 +36,7 @@ impl Default for GlazedTiles {
 }
 
 /// One member of the family.
-struct Tiling {
+pub(crate) struct Tiling {
     config: GlazedTiles,
     n: usize,
     tile_colour: Vec<[f64; 3]>,
@@ -46,7 +44,14 @@ struct Tiling {
     noise: PeriodicNoise,
 }
 
-impl GlazedTiles {
+impl PatternFamily for GlazedTiles {
+    const NAME: &'static str = "tiles";
+    type Member = Tiling;
+
+    fn brdf(&self) -> String {
+        format!("height(ggx, scale={})", self.relief)
+    }
+
     fn member(&self, seed: u64) -> Tiling {
         let n = self.tiles_per_side.max(1) as usize;
         let mut rng = StdRng::seed_from_u64(seed);
@@ -105,26 +110,13 @@ impl Pattern for Tiling {
     }
 }
 
-impl Family for GlazedTiles {
-    fn name(&self) -> &'static str {
-        "tiles"
-    }
-
-    fn brdf(&self) -> String {
-        format!("height(ggx, scale={})", self.relief)
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
-        sample_maps(&self.member(seed), size, device)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::procedural::common::testing::assert_periodic;
-    use candle_core::Tensor;
+    use crate::procedural::Family;
+    use candle_core::{Device, Tensor};
     use photomat_brdfs as _;
+    use photomat_core::MaterialMaps;
 
     fn maps(seed: u64) -> MaterialMaps {
         GlazedTiles::default()
@@ -139,7 +131,7 @@ mod tests {
     #[test]
     fn tiles_validate_for_their_brdf_and_are_deterministic() {
         let family = GlazedTiles::default();
-        let brdf = photomat_core::lookup(&family.brdf()).unwrap();
+        let brdf = photomat_core::lookup(&Family::brdf(&family)).unwrap();
         let a = maps(3);
         a.validate(&brdf.name(), brdf.params()).unwrap();
         for (name, t) in a.iter() {
@@ -153,13 +145,6 @@ mod tests {
             flat(a.get("diffuse").unwrap()),
             flat(maps(4).get("diffuse").unwrap())
         );
-    }
-
-    #[test]
-    fn tiles_are_periodic() {
-        for seed in 0..4 {
-            assert_periodic(&GlazedTiles::default().member(seed));
-        }
     }
 
     #[test]

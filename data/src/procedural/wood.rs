@@ -14,14 +14,12 @@
 //! ring waviness, pore density and strength, varnish gloss, grain direction (one of the 8
 //! symmetries of the square).
 
-use candle_core::Device;
-use photomat_core::{MaterialMaps, Result};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::Family;
+use super::PatternFamily;
 use super::common::{
-    GgxTexel, Pattern, Symmetry, counts, jitter, mix, sample_maps, scale, smoothstep, srgb, wrap01,
+    GgxTexel, Pattern, Symmetry, counts, jitter, mix, scale, smoothstep, srgb, wrap01,
 };
 use super::noise::{PeriodicNoise, mix64, unit_f64};
 
@@ -64,7 +62,7 @@ const SPECIES: [([f64; 3], [f64; 3]); 8] = [
 const JOINT_WIDTH: f64 = 0.005;
 
 /// One member of the family.
-struct Board {
+pub(crate) struct Board {
     symmetry: Symmetry,
     early: [f64; 3],
     late: [f64; 3],
@@ -86,7 +84,14 @@ struct Board {
     noise: PeriodicNoise,
 }
 
-impl Wood {
+impl PatternFamily for Wood {
+    const NAME: &'static str = "wood";
+    type Member = Board;
+
+    fn brdf(&self) -> String {
+        format!("height(ggx, scale={})", self.relief)
+    }
+
     fn member(&self, seed: u64) -> Board {
         let mut rng = StdRng::seed_from_u64(seed);
         let (early, late) = SPECIES[rng.random_range(0..SPECIES.len())];
@@ -173,31 +178,10 @@ impl Pattern for Board {
     }
 }
 
-impl Family for Wood {
-    fn name(&self) -> &'static str {
-        "wood"
-    }
-
-    fn brdf(&self) -> String {
-        format!("height(ggx, scale={})", self.relief)
-    }
-
-    fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps> {
-        sample_maps(&self.member(seed), size, device)
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::procedural::common::testing::{assert_periodic, channel_stats};
-
-    #[test]
-    fn wood_is_periodic() {
-        for seed in 0..6 {
-            assert_periodic(&Wood::default().member(seed));
-        }
-    }
+    use crate::procedural::common::testing::channel_stats;
 
     #[test]
     fn wood_is_varnished_dielectric_with_wood_colours() {
