@@ -22,6 +22,45 @@ fn item(t: &Tensor, b: usize) -> PlanarImage {
     PlanarImage::from_tensor(&t.narrow(0, b, 1).unwrap()).unwrap()
 }
 
+/// Checks that `cut`, the flash geometry of a `window` of a `photo`² image, is the geometry
+/// `whole` of the image cut at the window and transformed by its symmetry: per texel, ω
+/// rotated or flipped with the pixels and 1/d² moved with them, to 1e-12 (f64 rounding of
+/// the two ways of writing the same texel position).
+fn assert_cut_of(
+    cut: &FlashGeometry,
+    whole: &FlashGeometry,
+    photo: usize,
+    window: &CropWindow,
+) -> Result<(), TestCaseError> {
+    let values = |t: &Tensor| -> Vec<f64> { t.flatten_all().unwrap().to_vec1().unwrap() };
+    let (whole_omega, whole_d2) = (values(&whole.omega), values(&whole.inv_dist2));
+    let (cut_omega, cut_d2) = (values(&cut.omega), values(&cut.inv_dist2));
+    let h = window.size;
+    let (pp, hh) = (photo * photo, h * h);
+    for i in 0..h {
+        for j in 0..h {
+            let src = (window.top + i) * photo + window.left + j;
+            let (a, b) = window.symmetry.pixel((i, j), h);
+            let dst = a * h + b;
+            let v = window.symmetry.vector([
+                whole_omega[src],
+                whole_omega[pp + src],
+                whole_omega[2 * pp + src],
+            ]);
+            for c in 0..3 {
+                prop_assert!(
+                    (cut_omega[c * hh + dst] - v[c]).abs() < 1e-12,
+                    "ω[{c}] at cut pixel ({a}, {b}): {} vs {}",
+                    cut_omega[c * hh + dst],
+                    v[c]
+                );
+            }
+            prop_assert!((cut_d2[dst] - whole_d2[src]).abs() < 1e-12);
+        }
+    }
+    Ok(())
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(64))]
 
@@ -58,32 +97,7 @@ proptest! {
             &Device::Cpu,
         )
         .unwrap();
-        let whole_omega: Vec<f64> = whole.omega.flatten_all().unwrap().to_vec1().unwrap();
-        let whole_d2: Vec<f64> = whole.inv_dist2.flatten_all().unwrap().to_vec1().unwrap();
-        let crop_omega: Vec<f64> = crop.omega.flatten_all().unwrap().to_vec1().unwrap();
-        let crop_d2: Vec<f64> = crop.inv_dist2.flatten_all().unwrap().to_vec1().unwrap();
-        let (pp, hh) = (photo * photo, h * h);
-        for i in 0..h {
-            for j in 0..h {
-                let src = (window.top + i) * photo + window.left + j;
-                let (a, b) = window.symmetry.pixel((i, j), h);
-                let dst = a * h + b;
-                let v = window.symmetry.vector([
-                    whole_omega[src],
-                    whole_omega[pp + src],
-                    whole_omega[2 * pp + src],
-                ]);
-                for c in 0..3 {
-                    prop_assert!(
-                        (crop_omega[c * hh + dst] - v[c]).abs() < 1e-12,
-                        "ω[{c}] at crop pixel ({a}, {b}): {} vs {}",
-                        crop_omega[c * hh + dst],
-                        v[c]
-                    );
-                }
-                prop_assert!((crop_d2[dst] - whole_d2[src]).abs() < 1e-12);
-            }
-        }
+        assert_cut_of(&crop, &whole, photo, &window)?;
     }
 }
 
@@ -401,34 +415,7 @@ proptest! {
             &Device::Cpu,
         )
         .unwrap();
-        let whole_omega: Vec<f64> = whole.omega.flatten_all().unwrap().to_vec1().unwrap();
-        let whole_d2: Vec<f64> = whole.inv_dist2.flatten_all().unwrap().to_vec1().unwrap();
-        let cut_omega: Vec<f64> = cut.omega.flatten_all().unwrap().to_vec1().unwrap();
-        let cut_d2: Vec<f64> = cut.inv_dist2.flatten_all().unwrap().to_vec1().unwrap();
-        let (ss, pp) = (photo * photo, p * p);
-        let w = patch.window;
-        for i in 0..p {
-            for j in 0..p {
-                let src = (w.top + i) * photo + w.left + j;
-                let (a, b) = w.symmetry.pixel((i, j), p);
-                let dst = a * p + b;
-                let v = w.symmetry.vector([
-                    whole_omega[src],
-                    whole_omega[ss + src],
-                    whole_omega[2 * ss + src],
-                ]);
-                for c in 0..3 {
-                    // f64 rounding of the two ways of writing the same texel position.
-                    prop_assert!(
-                        (cut_omega[c * pp + dst] - v[c]).abs() < 1e-12,
-                        "ω[{c}] at patch pixel ({a}, {b}): {} vs {}",
-                        cut_omega[c * pp + dst],
-                        v[c]
-                    );
-                }
-                prop_assert!((cut_d2[dst] - whole_d2[src]).abs() < 1e-12);
-            }
-        }
+        assert_cut_of(&cut, &whole, photo, &patch.window)?;
     }
 }
 

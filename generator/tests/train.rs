@@ -46,6 +46,21 @@ fn tiny_config(data: &Path, tileable: bool) -> TrainConfig {
     c
 }
 
+/// A trainer of `config` after `steps` steps on `data`, its state saved to the folder `run`.
+fn trained_and_saved(
+    config: &TrainConfig,
+    data: &DatasetSource,
+    steps: usize,
+    run: &Path,
+) -> Result<Trainer> {
+    let mut trainer = Trainer::new(config.clone(), &Device::Cpu)?;
+    for _ in 0..steps {
+        trainer.step(data)?;
+    }
+    trainer.save_state(run)?;
+    Ok(trainer)
+}
+
 fn mean(v: &[f64]) -> f64 {
     v.iter().sum::<f64>() / v.len() as f64
 }
@@ -116,12 +131,7 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
     }
 
     let run = dir.path().join("run");
-    let mut first = Trainer::new(config.clone(), &Device::Cpu)?;
-    for _ in 0..3 {
-        first.step(&data)?;
-    }
-    first.save_state(&run)?;
-    drop(first);
+    drop(trained_and_saved(&config, &data, 3, &run)?);
     let mut resumed = Trainer::new(config.clone(), &Device::Cpu)?;
     assert_eq!(resumed.load_state(&run)?, Restored::Exactly);
     assert_eq!(resumed.steps_done(), 3);
@@ -155,11 +165,7 @@ fn a_state_without_optimisers_resumes_the_networks_with_fresh_adam() -> Result<(
     let data = DatasetSource::open(&data_dir, 32)?;
     let config = tiny_config(&data_dir, true);
     let run = dir.path().join("run");
-    let mut first = Trainer::new(config.clone(), &Device::Cpu)?;
-    for _ in 0..3 {
-        first.step(&data)?;
-    }
-    first.save_state(&run)?;
+    let first = trained_and_saved(&config, &data, 3, &run)?;
     let portable = dir.path().join("portable");
     let bytes = write_without_optimiser(&run, &portable)?;
     let full = std::fs::metadata(run.join(STATE_FILE))?.len();
@@ -325,11 +331,7 @@ fn relief_switched_on_at_a_resume_starts_at_zero_and_then_trains() -> Result<()>
     let data = DatasetSource::open(&data_dir, 32)?;
     let config = tiny_config(&data_dir, true);
     let run = dir.path().join("run");
-    let mut first = Trainer::new(config.clone(), &Device::Cpu)?;
-    for _ in 0..2 {
-        first.step(&data)?;
-    }
-    first.save_state(&run)?;
+    let first = trained_and_saved(&config, &data, 2, &run)?;
 
     // The full state (optimisers included) lacks M's relief projection and its moments.
     let mut with_relief = config.clone();
