@@ -144,7 +144,7 @@ fn main() -> anyhow::Result<()> {
         let bytes = std::fs::read(set.join(name))?;
         let mut options = CaptureOptions {
             size: SIZE,
-            fov_degrees: fov,
+            fov_degrees: Some(fov),
             ..CaptureOptions::default()
         };
         let true_px = photo["highlight_px"]

@@ -71,7 +71,7 @@ fn main() -> anyhow::Result<()> {
     }
     let options = CaptureOptions {
         size: SIZE,
-        fov_degrees: 90.0,
+        fov_degrees: Some(90.0),
         anchor,
         ..CaptureOptions::default()
     };

@@ -26,8 +26,9 @@
 //! what a single light cannot separate (e.g. roughness far from the highlight) smooth rather
 //! than noisy. Adam ([`photomat_train::Adam`]) steps all of them.
 //!
-//! The camera's field of view is an input ([`CaptureOptions::fov_degrees`]): it sets how wide
-//! the photographed square is at the flash's height 1 ([`square_side`];
+//! The camera's field of view is an input ([`CaptureOptions::fov_degrees`]; when it is not
+//! given, the photo's EXIF focal length, else a phone's main camera: [`field_of_view`]): it
+//! sets how wide the photographed square is at the flash's height 1 ([`square_side`];
 //! docs/conventions.md, "A photo's field of view"), hence the texel size of the maps and the
 //! angles under which each texel saw the flash. [`relight`] renders the fitted maps under
 //! new flash positions ([`new_flash_positions`]), which a single photo never showed.
@@ -62,6 +63,7 @@
 
 pub mod camera;
 pub mod evaluate;
+pub mod field_of_view;
 pub mod prior;
 
 use std::path::Path;
@@ -83,6 +85,7 @@ use photomat_train::{Adam, AdamConfig};
 use serde::Serialize;
 
 pub use camera::CameraTerms;
+pub use field_of_view::{FieldOfView, FovSource};
 pub use prior::{GanPrior, Inversion, PriorOptions};
 
 /// Smallest and largest side of a capture: below 16 texels there is no highlight to fit,
@@ -137,9 +140,11 @@ pub struct CaptureOptions {
     /// The highlight in continuous pixel `(row, col)` of the square image, instead of
     /// detecting it.
     pub highlight: Option<(f64, f64)>,
-    /// Field of view across the photo's longer side, in degrees ([`DEFAULT_FOV_DEGREES`]);
-    /// with the camera straight down it sets the square's side ([`square_side`]).
-    pub fov_degrees: f64,
+    /// Field of view across the photo's longer side, in degrees; with the camera straight
+    /// down it sets the square's side ([`square_side`]). `None` (the default): the photo's
+    /// EXIF 35 mm equivalent focal length, else [`DEFAULT_FOV_DEGREES`]
+    /// ([`field_of_view::field_of_view`]).
+    pub fov_degrees: Option<f64>,
     /// Weight μ of the anchor `mean |θ − θ₀|` that holds the refined raw maps near the
     /// prior's; no effect without a prior. Default 0.05: on simulated photos it relit better
     /// than 0 on two of three families tried, and better on their mean (docs/benchmarks.md,
@@ -212,7 +217,7 @@ impl Default for CaptureOptions {
             lr: 0.05,
             smoothness: 0.002,
             highlight: None,
-            fov_degrees: DEFAULT_FOV_DEGREES,
+            fov_degrees: None,
             anchor: 0.05,
             warmup_steps: 100,
             vignetting: true,
@@ -246,8 +251,8 @@ pub struct Capture {
     pub ambient: Option<f64>,
     /// Side of the photographed square in world units, at flash height 1 ([`square_side`]).
     pub side: f64,
-    /// The field of view it was computed from, in degrees.
-    pub fov_degrees: f64,
+    /// The field of view it was computed from, and where that came from.
+    pub fov: FieldOfView,
     /// Loss after every refinement step.
     pub losses: Vec<f64>,
     /// Wall seconds of the refinement, its coarse stage included.
@@ -403,6 +408,8 @@ struct Input {
     photo: Tensor,
     size: usize,
     highlight: HighlightUsed,
+    /// The field of view the square's side comes from.
+    fov: FieldOfView,
     side: f64,
     texel: f64,
     /// The photo's flash, on the square of side `side`.
@@ -453,6 +460,7 @@ impl Input {
             photo,
             size: n,
             highlight: self.highlight.clone(),
+            fov: self.fov,
             side,
             texel: side / n as f64,
             light: self.light,
@@ -467,13 +475,6 @@ fn prepare_input(bytes: &[u8], name: &str, options: &CaptureOptions) -> anyhow::
     let (lo, hi) = SIZE_RANGE;
     if !(lo..=hi).contains(&options.size) {
         bail!("capture size {} is outside {lo} … {hi}", options.size);
-    }
-    let (fov_lo, fov_hi) = FOV_RANGE;
-    if !(fov_lo..=fov_hi).contains(&options.fov_degrees) {
-        bail!(
-            "field of view {}° is outside {fov_lo} … {fov_hi}°",
-            options.fov_degrees
-        );
     }
     let n = options.size;
     let framing = Framing {
@@ -506,7 +507,9 @@ fn prepare_input(bytes: &[u8], name: &str, options: &CaptureOptions) -> anyhow::
     let device = Device::Cpu;
     let photo = prepared.image.to_tensor(&device)?;
     let [width, height] = prepared.source_size;
-    let side = square_side(options.fov_degrees, width, height);
+    let fov = field_of_view::field_of_view(options.fov_degrees, bytes, width, height)
+        .with_context(|| name.to_string())?;
+    let side = square_side(fov.degrees, width, height);
     let (row, col) = highlight.pixel;
     let light = Highlight::from_pixel_on(row, col, n, side);
     let geometry = FlashGeometry::with_side(&[light], n, side, DType::F32, &device)?;
@@ -514,6 +517,7 @@ fn prepare_input(bytes: &[u8], name: &str, options: &CaptureOptions) -> anyhow::
         photo,
         size: n,
         highlight,
+        fov,
         side,
         texel: side / n as f64,
         light,
@@ -682,7 +686,7 @@ fn refine(
         vignetting: terms.vignetting()?,
         ambient: terms.ambient()?,
         side,
-        fov_degrees: options.fov_degrees,
+        fov: input.fov,
         losses,
         seconds: start.elapsed().as_secs_f64(),
         coarse,
@@ -917,6 +921,8 @@ struct CaptureRecord<'a> {
     brdf: String,
     size: usize,
     fov_degrees: f64,
+    /// Where the field of view came from (given, EXIF, default).
+    fov_source: FovSource,
     side: f64,
     texel_size: f64,
     highlight: &'a HighlightUsed,
@@ -1049,7 +1055,8 @@ pub fn write_capture(
     let record = CaptureRecord {
         brdf: capture.brdf.name(),
         size: n,
-        fov_degrees: capture.fov_degrees,
+        fov_degrees: capture.fov.degrees,
+        fov_source: capture.fov.source,
         side: capture.side,
         texel_size: capture.side / n as f64,
         highlight: &capture.highlight,

@@ -5,9 +5,10 @@
 
 use candle_core::{DType, Device, Tensor};
 use photomat_brdfs as _; // link the built-in models
+use photomat_capture::field_of_view::fov_from_35mm_equivalent;
 use photomat_capture::{
-    CaptureOptions, Exports, TRAINING_FOV_DEGREES, capture, new_flash_positions, relight,
-    square_side, write_capture,
+    CaptureOptions, DEFAULT_FOV_DEGREES, Exports, FovSource, TRAINING_FOV_DEGREES, capture,
+    new_flash_positions, relight, square_side, write_capture,
 };
 use photomat_core::flash::PHOTO_SIDE;
 use photomat_core::image_io::{PlanarImage, PngBits, encode_png, png_header};
@@ -89,7 +90,7 @@ fn capture_fits_a_rendered_photo_and_writes_a_loadable_folder() {
     let options = CaptureOptions {
         size: SIZE,
         steps: 200,
-        fov_degrees: TRAINING_FOV_DEGREES,
+        fov_degrees: Some(TRAINING_FOV_DEGREES),
         ..CaptureOptions::default()
     };
     let result = capture(&png, "rendered.png", &brdf, &options, &mut |_, _| {}).unwrap();
@@ -176,7 +177,7 @@ fn the_right_field_of_view_relights_closer_to_the_truth() {
         let options = CaptureOptions {
             size: SIZE,
             steps: 150,
-            fov_degrees,
+            fov_degrees: Some(fov_degrees),
             ..CaptureOptions::default()
         };
         let fit = capture(&png, "fov60.png", &brdf, &options, &mut |_, _| {}).unwrap();
@@ -192,6 +193,76 @@ fn the_right_field_of_view_relights_closer_to_the_truth() {
         right < 0.8 * wrong,
         "held-out L1 with the right fov {right}, with 90° {wrong}"
     );
+}
+
+/// `png` re-encoded as a JPEG whose EXIF records a 35 mm equivalent focal length of `mm`, as
+/// a phone writes it.
+fn jpeg_with_focal_length(png: &[u8], mm: u16) -> Vec<u8> {
+    let rgb = image::load_from_memory(png).unwrap().to_rgb8();
+    let field = exif::Field {
+        tag: exif::Tag::FocalLengthIn35mmFilm,
+        ifd_num: exif::In::PRIMARY,
+        value: exif::Value::Short(vec![mm]),
+    };
+    let mut writer = exif::experimental::Writer::new();
+    writer.push_field(&field);
+    let mut tiff = std::io::Cursor::new(Vec::new());
+    writer.write(&mut tiff, true).unwrap();
+    let mut app1 = b"Exif\0\0".to_vec();
+    app1.extend(tiff.into_inner());
+    let mut jpeg = Vec::new();
+    let mut encoder = jpeg_encoder::Encoder::new(&mut jpeg, 95);
+    encoder.add_app_segment(1, &app1).unwrap();
+    let (w, h) = (rgb.width() as u16, rgb.height() as u16);
+    encoder
+        .encode(rgb.as_raw(), w, h, jpeg_encoder::ColorType::Rgb)
+        .unwrap();
+    jpeg
+}
+
+#[test]
+fn the_field_of_view_comes_from_the_photos_exif_unless_given() {
+    // A square photo spanning a 61° field of view: 26 mm equivalent (EXIF stores whole mm).
+    let fov = fov_from_35mm_equivalent(26.0, SIZE, SIZE);
+    let (png, _) = photo_of_side(square_side(fov, SIZE, SIZE));
+    let jpeg = jpeg_with_focal_length(&png, 26);
+    let brdf = lookup("ggx").unwrap();
+    let options = CaptureOptions {
+        size: SIZE,
+        steps: 5,
+        ..CaptureOptions::default()
+    };
+    let from_exif = capture(&jpeg, "phone.jpg", &brdf, &options, &mut |_, _| {}).unwrap();
+    assert_eq!(
+        from_exif.fov.source,
+        FovSource::Exif {
+            focal_length_35mm: 26.0
+        }
+    );
+    assert!((from_exif.fov.degrees - fov).abs() < 1e-12);
+    assert!((from_exif.side - square_side(fov, SIZE, SIZE)).abs() < 1e-12);
+    // Given, it wins over the EXIF; without EXIF (the PNG), the default.
+    let given = CaptureOptions {
+        fov_degrees: Some(TRAINING_FOV_DEGREES),
+        ..options.clone()
+    };
+    let fit = capture(&jpeg, "phone.jpg", &brdf, &given, &mut |_, _| {}).unwrap();
+    assert_eq!(
+        (fit.fov.degrees, fit.fov.source),
+        (TRAINING_FOV_DEGREES, FovSource::Given)
+    );
+    let fit = capture(&png, "no-exif.png", &brdf, &options, &mut |_, _| {}).unwrap();
+    assert_eq!(
+        (fit.fov.degrees, fit.fov.source),
+        (DEFAULT_FOV_DEGREES, FovSource::Default)
+    );
+    // capture.json says where the field of view came from.
+    let dir = tempfile::tempdir().unwrap();
+    write_capture(&from_exif, dir.path(), Exports::default()).unwrap();
+    let record: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("capture.json")).unwrap()).unwrap();
+    assert_eq!(record["fov_source"]["kind"], "exif");
+    assert_eq!(record["fov_source"]["focal_length_35mm"], 26.0);
 }
 
 #[test]
@@ -238,7 +309,7 @@ fn uniform_maps_and_the_relief_are_fitted_as_one_value_and_unknown_names_fail() 
     let options = CaptureOptions {
         size: SIZE,
         steps: 40,
-        fov_degrees: TRAINING_FOV_DEGREES,
+        fov_degrees: Some(TRAINING_FOV_DEGREES),
         highlight: Some(pixel),
         uniform_maps: vec!["roughness".into()],
         ..CaptureOptions::default()
@@ -325,7 +396,7 @@ fn warm_up(
     let options = CaptureOptions {
         size: SIZE,
         steps: 1,
-        fov_degrees: TRAINING_FOV_DEGREES,
+        fov_degrees: Some(TRAINING_FOV_DEGREES),
         highlight: Some(pixel),
         warmup_steps: 150,
         vignetting,
@@ -377,7 +448,7 @@ fn a_coarse_stage_fits_at_half_size_and_relights_as_well_as_the_full_size_fit() 
         let options = CaptureOptions {
             size: SIZE,
             steps: 200,
-            fov_degrees: TRAINING_FOV_DEGREES,
+            fov_degrees: Some(TRAINING_FOV_DEGREES),
             full_size_steps,
             coarse_min_size: SIZE / 2,
             ..CaptureOptions::default()

@@ -53,7 +53,7 @@ fn options(size: usize) -> CaptureOptions {
     CaptureOptions {
         size,
         steps: 10,
-        fov_degrees: TRAINING_FOV_DEGREES,
+        fov_degrees: Some(TRAINING_FOV_DEGREES),
         ..CaptureOptions::default()
     }
 }

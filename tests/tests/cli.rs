@@ -595,9 +595,13 @@ fn cli_capture_takes_the_field_of_view_and_refuses_one_out_of_range() {
         "60",
     ])
     .unwrap();
-    assert!(printed.contains("from a 60° field of view"), "{printed}");
+    assert!(
+        printed.contains("from a 60.0° field of view (given)"),
+        "{printed}"
+    );
     let record: Value =
         serde_json::from_slice(&std::fs::read(out.join("capture.json")).unwrap()).unwrap();
+    assert_eq!(record["fov_source"]["kind"], "given", "{record}");
     let side = 2.0 * (30f64).to_radians().tan();
     assert!(
         (record["side"].as_f64().unwrap() - side).abs() < 1e-9,

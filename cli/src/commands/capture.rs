@@ -66,8 +66,10 @@ pub struct Args {
 
     /// The camera's field of view across the photo's longer side, in degrees (5 … 150), the
     /// camera looking straight down with the flash beside the lens. It sets the photographed
-    /// square's size relative to the flash's distance [default: 67, a phone's main camera at
-    /// 26 mm equivalent; 90 is the geometry of the training data, docs/conventions.md].
+    /// square's size relative to the flash's distance [default: from the photo's EXIF 35 mm
+    /// equivalent focal length when it has one (26 mm on 4:3 gives 67°), else 67, a phone's
+    /// main camera; 90 is the geometry of the training data and of `photomat simulate`'s
+    /// photos, docs/conventions.md].
     #[arg(long, value_name = "DEG", value_parser = parse_fov)]
     pub fov: Option<f64>,
 
@@ -181,7 +183,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         size: args.size.map_or(defaults.size, |n| n as usize),
         steps: args.steps.map_or(defaults.steps, |k| k as usize),
         highlight: args.highlight,
-        fov_degrees: args.fov.unwrap_or(defaults.fov_degrees),
+        fov_degrees: args.fov,
         anchor: args.anchor.unwrap_or(defaults.anchor),
         uniform_maps: args.uniform.clone(),
         relief: args.relief,
@@ -264,14 +266,15 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let (row, col) = result.highlight.pixel;
     writeln!(
         out,
-        "captured {} as {} ({}², a square of {:.3} at flash height 1 from a {}° field of view; \
+        "captured {} as {} ({}², a square of {:.3} at flash height 1 from a {:.1}° field of view ({}); \
          flash above pixel ({row:.1}, {col:.1}) by {}, gain {:.3}{}): \
          loss {:.4} → {:.4} in {} steps, {:.1} s",
         name,
         result.brdf.name(),
         options.size,
         result.side,
-        result.fov_degrees,
+        result.fov.degrees,
+        result.fov.source,
         result.highlight.source,
         result.gain,
         result
