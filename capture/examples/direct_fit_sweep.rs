@@ -9,7 +9,9 @@
 //! WARMUP is [`CaptureOptions::warmup_steps`]; FLAGS: `v` fits the vignetting, `a` the
 //! ambient light, `u` holds
 //! specular and roughness uniform, `h` the height (flat normals), `f` runs every step at the
-//! full size (no coarse stage, [`CaptureOptions::full_size_steps`]). SIZE: the capture size
+//! full size (no coarse stage, [`CaptureOptions::full_size_steps`]), `d` captures at the
+//! default field of view (the photo's EXIF focal length, else a phone's 67°) instead of the
+//! true one. SIZE: the capture size
 //! of simulator folders (default 256).
 //! SET: either a Mitsuba capture set (`validation/run.sh --capture-set`: each photo has
 //! `held_out` renders and truth maps in its pixel grid; captured at 320² with its true field
@@ -139,7 +141,7 @@ fn main() -> anyhow::Result<()> {
         for (w, (warmup, flags)) in configs.iter().enumerate() {
             let options = CaptureOptions {
                 size,
-                fov_degrees: fov,
+                fov_degrees: (!flags.contains('d')).then_some(fov),
                 highlight: Some((row * scale_px, col * scale_px)),
                 warmup_steps: *warmup,
                 vignetting: flags.contains('v'),
@@ -161,7 +163,14 @@ fn main() -> anyhow::Result<()> {
             let (r, c) = fit.highlight.pixel;
             let flash = Highlight::from_pixel_on(r, c, size, fit.side);
             let input = radiance_on_square(&brdf, &fit.maps, &[flash], fit.side)?;
-            let held = radiance_on_square(&brdf, &fit.maps, &lights, fit.side)?;
+            // The held-out flashes above the same pixels of the fit's square as of the true
+            // one (they differ when the fit's field of view is not the true one).
+            let true_side = photomat_capture::square_side(fov, size, size);
+            let fit_lights: Vec<Highlight> = lights
+                .iter()
+                .map(|l| Highlight::new(l.x * fit.side / true_side, l.y * fit.side / true_side))
+                .collect();
+            let held = radiance_on_square(&brdf, &fit.maps, &fit_lights, fit.side)?;
             let input_l1 = held_out_l1(&input, &fit.photo.powf(2.2)?)?;
             let held_l1 = held_out_l1(&held, &truth_held)?;
             let errors = if full == size {
