@@ -1,4 +1,4 @@
-//! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--size 256] [--steps 400] [--fov 67]
+//! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--size 256] [--steps 400] [--fov DEG]
 //! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]
 //! [--tolerance T] [--warmup-steps 100] [--no-vignetting] [--ambient] [--uniform MAP,…] [--relief]
 //! [--full-size-steps 100] [--gltf] [--mtlx]`:
