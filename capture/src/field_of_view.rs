@@ -1,5 +1,5 @@
 //! The field of view a photo was taken with: given by the user, read from the photo's EXIF, or
-//! a phone's main camera (docs/capture.md, "Field of view").
+//! a phone's main camera (docs/conventions.md, "A photo's field of view").
 //!
 //! With the camera straight down and the flash beside the lens, the field of view sets how
 //! wide the photographed square is at the flash's height ([`crate::square_side`]), hence the
