@@ -16,21 +16,14 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
-use candle_core::{DType, Device, Tensor};
-use candle_nn::VarMap;
-use photomat_data::discriminator_probe::box_blur;
+use candle_core::{Device, Tensor};
+use photomat_data::discriminator_probe::{box_blur, mean_logit};
 use photomat_data::source::DatasetSource;
-use photomat_generator::discriminator::Discriminator;
-use photomat_generator::init::seeded_var_builder;
 use photomat_generator::train::TrainingData;
 use photomat_generator::train::data::omega_for_placements;
+use photomat_generator::train::fresh_discriminator;
 use photomat_generator::train::loss::softplus;
 use photomat_generator::train::state::read_config;
-use photomat_train::Adam;
-
-fn mean(t: &Tensor) -> anyhow::Result<f64> {
-    Ok(t.mean_all()?.to_dtype(DType::F64)?.to_scalar()?)
-}
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -62,12 +55,7 @@ fn main() -> anyhow::Result<()> {
     let device = Device::Cpu;
     let source = DatasetSource::for_training(&config)?;
     let size = config.generator.resolution;
-    let vars = VarMap::new();
-    let d = Discriminator::new(
-        &config.generator,
-        seeded_var_builder(&vars, config.seed, DType::F32, &device),
-    )?;
-    let mut adam = Adam::for_varmap(&vars, |_| true, config.adam_d())?;
+    let (_vars, d, mut adam) = fresh_discriminator(&config, &device)?;
     let b = config.batch;
     let other_omega = |n: usize, seed: u64| -> anyhow::Result<Tensor> {
         let placements = source.fake_lights(n, seed)?;
@@ -86,9 +74,9 @@ fn main() -> anyhow::Result<()> {
     println!("{:>6}  {:>12}  {:>12}", "step", "texture gap", "light gap");
     for step in 0..=steps {
         if step % 50 == 0 {
-            let real = mean(&d.forward(&held_images, &held.omega)?)?;
-            let blurred = mean(&d.forward(&held_blurred, &held.omega)?)?;
-            let other = mean(&d.forward(&held_images, &held_other)?)?;
+            let real = mean_logit(&d, &held_images, &held.omega)?;
+            let blurred = mean_logit(&d, &held_blurred, &held.omega)?;
+            let other = mean_logit(&d, &held_images, &held_other)?;
             println!(
                 "{step:>6}  {:>12.3}  {:>12.3}",
                 real - blurred,

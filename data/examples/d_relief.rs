@@ -18,17 +18,15 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use candle_core::{DType, Device, Tensor};
-use candle_nn::VarMap;
 use photomat_brdfs as _; // link the built-in BRDF plugins
 use photomat_core::rng::SplitMix64;
 use photomat_core::{FlashGeometry, Highlight, lookup, render};
+use photomat_data::discriminator_probe::mean_logit;
 use photomat_data::procedural::families;
 use photomat_data::relief_signature::without_relief;
-use photomat_generator::discriminator::Discriminator;
-use photomat_generator::init::seeded_var_builder;
+use photomat_generator::train::fresh_discriminator;
 use photomat_generator::train::loss::softplus;
 use photomat_generator::train::state::read_config;
-use photomat_train::Adam;
 
 /// Pairs kept out of training, on which the gap is measured.
 const HELD_OUT: usize = 64;
@@ -57,10 +55,6 @@ fn pairs(first: usize, count: usize, size: usize) -> anyhow::Result<(Tensor, Ten
     Ok((cat(with)?, cat(without)?, cat(omega)?))
 }
 
-fn mean(t: &Tensor) -> anyhow::Result<f64> {
-    Ok(t.mean_all()?.to_dtype(DType::F64)?.to_scalar()?)
-}
-
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let usage = "usage: d_relief RUN [STEPS] [PAIRS]";
@@ -72,12 +66,7 @@ fn main() -> anyhow::Result<()> {
     let device = Device::Cpu;
     let (train_with, train_without, train_omega) = pairs(0, count, size)?;
     let (held_with, held_without, held_omega) = pairs(count, HELD_OUT, size)?;
-    let vars = VarMap::new();
-    let d = Discriminator::new(
-        &config.generator,
-        seeded_var_builder(&vars, config.seed, DType::F32, &device),
-    )?;
-    let mut adam = Adam::for_varmap(&vars, |_| true, config.adam_d())?;
+    let (_vars, d, mut adam) = fresh_discriminator(&config, &device)?;
     let b = config.batch;
     println!(
         "D of {} (multiplier {}, input sharpening {}, {size}², batch {b}, lr {}): mean logit \
@@ -90,8 +79,8 @@ fn main() -> anyhow::Result<()> {
     println!("{:>6}  {:>10}", "step", "relief gap");
     for step in 0..=steps {
         if step % 50 == 0 {
-            let gap = mean(&d.forward(&held_with, &held_omega)?)?
-                - mean(&d.forward(&held_without, &held_omega)?)?;
+            let gap = mean_logit(&d, &held_with, &held_omega)?
+                - mean_logit(&d, &held_without, &held_omega)?;
             println!("{step:>6}  {gap:>10.3}");
         }
         if step == steps {

@@ -17,6 +17,7 @@
 use std::path::Path;
 
 use candle_core::{Device, Result, Tensor};
+use photomat_generator::discriminator::Discriminator;
 use photomat_generator::train::data::omega_for_placements;
 use photomat_generator::train::state::read_config;
 use photomat_generator::train::{Trainer, TrainingData};
@@ -88,24 +89,26 @@ pub fn probe_discriminator(
     let features = trainer.model().features_for_seeds_at(&seeds, 1.0, size)?;
     let fakes = trainer.model().relight().forward(&features, &other_omega)?;
     let d = trainer.discriminator();
-    let mean_logit = |images: &Tensor, omega: &Tensor| -> Result<f64> {
-        d.forward(images, omega)?
-            .mean_all()?
-            .to_dtype(candle_core::DType::F64)?
-            .to_scalar()
-    };
     Ok(DiscriminatorProbe {
         step: trainer.steps_done(),
         count,
-        reals: mean_logit(&reals.images, &reals.omega)?,
-        reals_other_lights: mean_logit(&reals.images, &other_omega)?,
+        reals: mean_logit(d, &reals.images, &reals.omega)?,
+        reals_other_lights: mean_logit(d, &reals.images, &other_omega)?,
         reals_blurred: [
-            mean_logit(&box_blur(&reals.images, BLUR_RADII[0])?, &reals.omega)?,
-            mean_logit(&box_blur(&reals.images, BLUR_RADII[1])?, &reals.omega)?,
+            mean_logit(d, &box_blur(&reals.images, BLUR_RADII[0])?, &reals.omega)?,
+            mean_logit(d, &box_blur(&reals.images, BLUR_RADII[1])?, &reals.omega)?,
         ],
-        fakes: mean_logit(&fakes, &other_omega)?,
-        fakes_other_lights: mean_logit(&fakes, &reals.omega)?,
+        fakes: mean_logit(d, &fakes, &other_omega)?,
+        fakes_other_lights: mean_logit(d, &fakes, &reals.omega)?,
     })
+}
+
+/// D's mean logit on `images` under `omega`, both (B, 3, R, R).
+pub fn mean_logit(d: &Discriminator, images: &Tensor, omega: &Tensor) -> Result<f64> {
+    d.forward(images, omega)?
+        .mean_all()?
+        .to_dtype(candle_core::DType::F64)?
+        .to_scalar()
 }
 
 /// Keys mixed into the seed for the other lights and the fakes' seeds, so that neither

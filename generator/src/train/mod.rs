@@ -31,4 +31,6 @@ pub mod trainer;
 pub use config::{Cadence, PatchTraining, TrainConfig};
 pub use data::{FlashPlacement, RealBatch, TrainingData};
 pub use driver::{GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan};
-pub use trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
+pub use trainer::{
+    PhaseSeconds, StepStats, Trainer, enable_second_order_gradients, fresh_discriminator,
+};

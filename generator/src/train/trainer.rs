@@ -184,6 +184,23 @@ pub struct Trainer {
     state: VarMap,
 }
 
+/// D of `config`'s architecture initialised from the run seed ([`seeded_var_builder`]), the
+/// variables that hold its weights, and its Adam with the run's D settings (moments zero):
+/// what a fresh run trains ([`Trainer::new`]), and where the probes that train D alone start
+/// (the data crate's `d_capacity` and `d_relief` examples).
+pub fn fresh_discriminator(
+    config: &TrainConfig,
+    device: &Device,
+) -> Result<(VarMap, Discriminator, Adam)> {
+    let vars = VarMap::new();
+    let d = Discriminator::new(
+        &config.generator,
+        seeded_var_builder(&vars, config.seed, DType::F32, device),
+    )?;
+    let adam = Adam::for_varmap(&vars, |name| !is_buffer(name), config.adam_d())?;
+    Ok((vars, d, adam))
+}
+
 impl Trainer {
     /// A fresh run: G, M and D initialised from the run seed ([`seeded_var_builder`]),
     /// G_ema a copy of G, moments zero, step 0.
@@ -207,14 +224,8 @@ impl Trainer {
         }
         let ema_model = GanModel::from_vars(cfg, ema_vars, device)?;
         let ema = Ema::new(ema_model.vars(), model.vars(), &format!("{G_PREFIX}."))?;
-        let d_vars = VarMap::new();
-        let d = Discriminator::new(
-            cfg,
-            seeded_var_builder(&d_vars, config.seed, DType::F32, device),
-        )?;
-        let trainable = |name: &str| !is_buffer(name);
-        let opt_g = Adam::for_varmap(model.vars(), trainable, config.adam_g())?;
-        let opt_d = Adam::for_varmap(&d_vars, trainable, config.adam_d())?;
+        let (d_vars, d, opt_d) = fresh_discriminator(&config, device)?;
+        let opt_g = Adam::for_varmap(model.vars(), |name| !is_buffer(name), config.adam_g())?;
         let counters = Var::zeros(2, DType::F64, device)?;
         let state = VarMap::new();
         insert_renamed(&state, model.vars(), "", "");
