@@ -85,8 +85,13 @@ def mirror_point(camera, flash):
     return camera + t * (image - camera)
 
 
-def texture_maps(name, tint, rng, relief):
-    """(base colour in linear rgb, tangent-space normal map in [0, 1]) from a texture photo."""
+def texture_maps(name, tint, rng, relief, relief_source="luminance"):
+    """(base colour in linear rgb, tangent-space normal map in [0, 1]) from a texture photo.
+
+    `relief_source` "luminance" derives the heights from the texture's own luminance (dark =
+    deep); "independent" from the same texture turned by 90° and shifted by half its side, so
+    that the relief has the texture's kind of structure but no texel's height follows from its
+    colour (a fair test of recovering relief from shading)."""
     from skimage import data
 
     grey = getattr(data, name)().astype(np.float64) / 255.0
@@ -95,7 +100,11 @@ def texture_maps(name, tint, rng, relief):
     albedo = np.clip(linear[..., None] * np.array(tint) * 2.0, 0.0, 1.0)
     # Relief from the luminance (dark = deep), as artists derive bump maps (central
     # differences, in height units per texel).
-    height = grey * relief
+    if relief_source == "independent":
+        turned = np.rot90(grey)
+        height = np.roll(turned, (turned.shape[0] // 2, turned.shape[1] // 2), axis=(0, 1)) * relief
+    else:
+        height = grey * relief
     gx = (np.roll(height, -1, 1) - np.roll(height, 1, 1)) / 2
     gy = (np.roll(height, -1, 0) - np.roll(height, 1, 0)) / 2
     n = np.stack([-gx, gy, np.ones_like(gx)], axis=-1)
@@ -432,6 +441,13 @@ def main():
         "pixel grid) and its renders under the 8 held-out flashes of photomat capture (held/NNNNNN/K.exr, "
         "linear, without the phone's pipeline)",
     )
+    parser.add_argument(
+        "--relief-source",
+        choices=["luminance", "independent"],
+        default="luminance",
+        help="heights from the texture's luminance (dark = deep, as artists derive bump maps) or from the "
+        "texture turned by 90° and shifted (independent of the colour: texture_maps)",
+    )
     args = parser.parse_args()
 
     import mitsuba as mi
@@ -445,7 +461,7 @@ def main():
     photos = []
     for index in range(args.count):
         p = draw(rng, index)
-        albedo, normals = texture_maps(p["texture"], p["tint"], rng, p["relief"])
+        albedo, normals = texture_maps(p["texture"], p["tint"], rng, p["relief"], args.relief_source)
         linear = render(mi, p, rng, albedo, normals)
         jpeg = develop(linear, rng, p["vignetting"], p["noise"], p["exposure"], p["quality"])
         name = f"photos/{index:06}.jpg"
@@ -463,7 +479,12 @@ def main():
                     "fov_deg": p["fov"],
                     "flash": p["flash"].tolist(),
                 },
-                "material": {"tint": p["tint"], "roughness": p["roughness"], "relief": p["relief"]},
+                "material": {
+                    "tint": p["tint"],
+                    "roughness": p["roughness"],
+                    "relief": p["relief"],
+                    "relief_source": args.relief_source,
+                },
                 "pipeline": {k: p[k] for k in ["vignetting", "noise", "exposure", "quality"]},
             }
         )
