@@ -96,9 +96,7 @@ pub const SIZE_RANGE: (usize, usize) = (16, 2048);
 /// (26 mm equivalent focal length on a 4:3 sensor: 2·atan(17.3 / 26) ≈ 67°).
 pub const DEFAULT_FOV_DEGREES: f64 = 67.0;
 
-/// The field of view under which a square photo spans the training data's
-/// [`photomat_core::flash::PHOTO_SIDE`] = 2 at flash height 1: 2·atan(1) = 90°.
-pub const TRAINING_FOV_DEGREES: f64 = 90.0;
+pub use photomat_core::flash::TRAINING_FOV_DEGREES;
 
 /// Fields of view a capture accepts, in degrees: below 5° the photo is a telescope's, above
 /// 150° a fisheye's, which a pinhole straight down does not describe.

@@ -5,7 +5,6 @@
 
 use candle_core::{DType, Device, Tensor};
 use photomat_brdfs as _; // link the built-in models
-use photomat_capture::field_of_view::fov_from_35mm_equivalent;
 use photomat_capture::{
     CaptureOptions, DEFAULT_FOV_DEGREES, Exports, FovSource, TRAINING_FOV_DEGREES, capture,
     new_flash_positions, relight, square_side, write_capture,
@@ -15,6 +14,7 @@ use photomat_core::image_io::{PlanarImage, PngBits, encode_png, png_header};
 use photomat_core::map_files::load_maps;
 use photomat_core::render::render_radiance_with;
 use photomat_core::{FlashGeometry, Highlight, MaterialMaps, encode_display, lookup};
+use photomat_data::dataset::lens::{LensRecord, fov_from_35mm_equivalent};
 
 const SIZE: usize = 64;
 
@@ -236,7 +236,9 @@ fn the_field_of_view_comes_from_the_photos_exif_unless_given() {
     assert_eq!(
         from_exif.fov.source,
         FovSource::Exif {
-            focal_length_35mm: 26.0
+            lens: LensRecord::Equivalent35mm {
+                focal_length_35mm: 26.0
+            }
         }
     );
     assert!((from_exif.fov.degrees - fov).abs() < 1e-12);
@@ -256,13 +258,30 @@ fn the_field_of_view_comes_from_the_photos_exif_unless_given() {
         (fit.fov.degrees, fit.fov.source),
         (DEFAULT_FOV_DEGREES, FovSource::Default)
     );
+    // The simulator's JPEGs record their 90° exactly (focal length and sensor pitch).
+    let light = Highlight::from_pixel_on(28.0, 36.0, SIZE, PHOTO_SIDE);
+    let image = render_truth(PHOTO_SIDE, &[light]).squeeze(0).unwrap();
+    let simulated = photomat_data::simulator::output::encode_photo(
+        &PlanarImage::from_tensor(&image).unwrap(),
+        photomat_data::simulator::PhotoFormat::Jpeg,
+    )
+    .unwrap();
+    let fit = capture(&simulated, "simulated.jpg", &brdf, &options, &mut |_, _| {}).unwrap();
+    assert!(matches!(
+        fit.fov.source,
+        FovSource::Exif {
+            lens: LensRecord::FocalPlane { .. }
+        }
+    ));
+    assert!((fit.fov.degrees - TRAINING_FOV_DEGREES).abs() < 1e-4);
     // capture.json says where the field of view came from.
     let dir = tempfile::tempdir().unwrap();
     write_capture(&from_exif, dir.path(), Exports::default()).unwrap();
     let record: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("capture.json")).unwrap()).unwrap();
     assert_eq!(record["fov_source"]["kind"], "exif");
-    assert_eq!(record["fov_source"]["focal_length_35mm"], 26.0);
+    assert_eq!(record["fov_source"]["lens"]["record"], "equivalent35mm");
+    assert_eq!(record["fov_source"]["lens"]["focal_length_35mm"], 26.0);
 }
 
 #[test]

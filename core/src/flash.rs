@@ -20,6 +20,9 @@ pub const PLANE_SIDE: f64 = 1.0;
 pub const PHOTO_SIDE: f64 = 2.0;
 /// Height of the collocated camera and flash above the plane.
 pub const FLASH_HEIGHT: f64 = 1.0;
+/// The field of view, in degrees, under which a square photo spans [`PHOTO_SIDE`] from
+/// [`FLASH_HEIGHT`]: 2·atan(1) = 90°, the training data's and the simulator's camera.
+pub const TRAINING_FOV_DEGREES: f64 = 90.0;
 /// Smallest flash elevation cosine ω_z a texel of a whole prepared photo sees when the
 /// highlight is at the photo's centre: its corner, √2 away horizontally under the flash at
 /// height 1, gives 1/√3. The relighting MLP M learns from such photos (highlights near the

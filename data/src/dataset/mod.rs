@@ -15,9 +15,11 @@
 //! - [`FlashDataset`] is an opened dataset folder: the index plus image loading, what the
 //!   training crop sampler reads;
 //! - [`prepare`](prepare::prepare) builds or extends a dataset from a folder of photos;
-//! - [`evaluate`](evaluate::evaluate) measures detectors against simulated ground truth.
+//! - [`evaluate`](evaluate::evaluate) measures detectors against simulated ground truth;
+//! - [`lens`] reads (and, for the simulator, writes) the field of view a photo's EXIF records.
 
 pub mod evaluate;
+pub mod lens;
 pub mod photo;
 pub mod prepare;
 pub mod simulation;

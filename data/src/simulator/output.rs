@@ -4,18 +4,22 @@
 //! Photos are quantised to 8 bits by rounding (the same rule as
 //! [`photomat_core::image_io::encode_png`]); JPEGs use baseline encoding at
 //! [`JPEG_QUALITY`] with the `image` crate's encoder, which is deterministic, so equal
-//! pictures give equal bytes. Every file is written atomically.
+//! pictures give equal bytes. Every file is written atomically. JPEGs carry EXIF recording the
+//! simulator's lens ([`TRAINING_FOV_DEGREES`] across, [`crate::dataset::lens`]), so that
+//! `photomat capture` reads the field of view they were taken with, as it does from a phone's.
 
 use std::io::Cursor;
 use std::path::Path;
 
 use image::codecs::jpeg::JpegEncoder;
 use image::{ExtendedColorType, ImageEncoder};
+use photomat_core::flash::TRAINING_FOV_DEGREES;
 use photomat_core::image_io::{PlanarImage, PngBits, encode_png, write_atomic};
 use photomat_core::{Error, Result};
 
 use super::camera::CameraModel;
 use super::pose::PhonePose;
+use crate::dataset::lens::exif_for_field_of_view;
 
 /// JPEG quality of simulated photos: a phone camera's default.
 pub const JPEG_QUALITY: u8 = 92;
@@ -73,7 +77,15 @@ pub fn encode_photo(photo: &PlanarImage, format: PhotoFormat) -> Result<Vec<u8>>
                 .map(|i| (photo.data[i].clamp(0.0, 1.0) * 255.0).round() as u8)
                 .collect();
             let mut out = Cursor::new(Vec::new());
-            JpegEncoder::new_with_quality(&mut out, JPEG_QUALITY)
+            let mut encoder = JpegEncoder::new_with_quality(&mut out, JPEG_QUALITY);
+            encoder
+                .set_exif_metadata(exif_for_field_of_view(
+                    TRAINING_FOV_DEGREES,
+                    photo.width,
+                    photo.height,
+                ))
+                .map_err(|e| Error::Invalid(format!("JPEG EXIF: {e}")))?;
+            encoder
                 .write_image(
                     &bytes,
                     photo.width as u32,
@@ -170,6 +182,26 @@ mod tests {
             .map(|i| (i % (size * size)) as f32 / (size * size) as f32)
             .collect();
         PlanarImage::new(3, size, size, data).unwrap()
+    }
+
+    #[test]
+    fn simulated_jpegs_record_the_simulators_field_of_view_in_exif() {
+        use crate::dataset::lens::{LensRecord, read_lens};
+        use photomat_core::flash::{FLASH_HEIGHT, PHOTO_SIDE};
+        // The constant is the geometry's: side 2 seen from height 1.
+        let geometric = 2.0 * (PHOTO_SIDE / 2.0 / FLASH_HEIGHT).atan().to_degrees();
+        assert!((TRAINING_FOV_DEGREES - geometric).abs() < 1e-12);
+        for size in [16, 512] {
+            let jpeg = encode_photo(&gradient(size), PhotoFormat::Jpeg).unwrap();
+            let lens = read_lens(&jpeg).expect("a simulated JPEG has a lens record");
+            assert!(matches!(lens, LensRecord::FocalPlane { .. }), "{lens:?}");
+            // The rationals keep 10⁻⁶ pixel per cm: far below a thousandth of a degree.
+            let fov = lens.fov_degrees(size, size);
+            assert!((fov - TRAINING_FOV_DEGREES).abs() < 1e-4, "{size}: {fov}");
+        }
+        // PNGs carry no EXIF.
+        let png = encode_photo(&gradient(16), PhotoFormat::Png).unwrap();
+        assert_eq!(read_lens(&png), None);
     }
 
     #[test]
