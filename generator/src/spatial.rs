@@ -18,7 +18,8 @@
 //! k·[`cell_size`](crate::GeneratorConfig::cell_size) texels; a field of n×n cells gives F of
 //! n·cell texels, periodic at that side (tileable at any size); a field tiled 2×2 gives F tiled
 //! 2×2. PSGAN's periodic channels are not used: the wrap-around padding already makes every
-//! sample periodic at its own size.
+//! sample periodic at its own size. Their other role, lattices that repeat across many cells
+//! (tiles, weave), is not covered (docs/neural-models.md, "Regular lattices").
 //!
 //! Parameter names under the base block's `vb` (`synthesis.b4`): `input.fc{i}.{weight,bias}`.
 
