@@ -258,7 +258,7 @@ fn the_field_of_view_comes_from_the_photos_exif_unless_given() {
         (fit.fov.degrees, fit.fov.source),
         (DEFAULT_FOV_DEGREES, FovSource::Default)
     );
-    // The simulator's JPEGs record their 90° exactly (focal length and sensor pitch).
+    // The simulator's photos record their 90° exactly (focal length and sensor pitch).
     let light = Highlight::from_pixel_on(28.0, 36.0, SIZE, PHOTO_SIDE);
     let image = render_truth(PHOTO_SIDE, &[light]).squeeze(0).unwrap();
     let simulated = photomat_data::simulator::output::encode_photo(

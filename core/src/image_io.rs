@@ -27,7 +27,8 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use candle_core::{DType, Device, Tensor};
-use image::{DynamicImage, ImageBuffer, ImageDecoder, ImageFormat, ImageReader};
+use image::codecs::png::PngEncoder;
+use image::{DynamicImage, ImageBuffer, ImageDecoder, ImageEncoder, ImageFormat, ImageReader};
 
 use crate::{Error, Result};
 
@@ -278,6 +279,10 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// Encode `image` (values in [0, 1], clamped; NaN writes 0) as a PNG of `bits` per channel.
 pub fn encode_png(image: &PlanarImage, bits: PngBits) -> Result<Vec<u8>> {
+    encode_png_inner(image, bits, None)
+}
+
+fn encode_png_inner(image: &PlanarImage, bits: PngBits, exif: Option<&[u8]>) -> Result<Vec<u8>> {
     let (w, h) = (image.width as u32, image.height as u32);
     let plane = image.texels();
     let scale = bits.max_value();
@@ -311,10 +316,21 @@ pub fn encode_png(image: &PlanarImage, bits: PngBits) -> Result<Vec<u8>> {
     }
     .ok_or_else(|| Error::Invalid("PNG buffer size mismatch".into()))?;
     let mut out = Cursor::new(Vec::new());
-    dynamic
-        .write_to(&mut out, ImageFormat::Png)
+    let mut encoder = PngEncoder::new(&mut out);
+    if let Some(exif) = exif {
+        encoder
+            .set_exif_metadata(exif.to_vec())
+            .map_err(|e| Error::Invalid(format!("PNG EXIF: {e}")))?;
+    }
+    encoder
+        .write_image(dynamic.as_bytes(), w, h, dynamic.color().into())
         .map_err(|e| Error::Invalid(format!("PNG encoding failed: {e}")))?;
     Ok(out.into_inner())
+}
+
+/// [`encode_png`] with `exif` (a TIFF structure, as EXIF is stored) in the PNG's `eXIf` chunk.
+pub fn encode_png_with_exif(image: &PlanarImage, bits: PngBits, exif: &[u8]) -> Result<Vec<u8>> {
+    encode_png_inner(image, bits, Some(exif))
 }
 
 /// Write `image` (values in [0, 1]) as a PNG, atomically.

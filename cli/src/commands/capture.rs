@@ -69,7 +69,7 @@ pub struct Args {
     /// square's size relative to the flash's distance [default: from the lens the photo's EXIF
     /// records, its focal length and sensor pitch or its 35 mm equivalent focal length (26 mm
     /// on 4:3 gives 67°), else 67, a phone's main camera; 90 is the geometry of the training
-    /// data and of `photomat simulate`'s photos, whose JPEGs record it, docs/conventions.md].
+    /// data and of `photomat simulate`'s photos, whose EXIF records it, docs/conventions.md].
     #[arg(long, value_name = "DEG", value_parser = parse_fov)]
     pub fov: Option<f64>,
 

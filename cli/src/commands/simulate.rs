@@ -8,7 +8,8 @@
 //! Photo i uses family number i mod F of the (sorted) `--families`, so each is equally
 //! represented. The camera model (`photomat_data::simulator::camera`): auto-exposure with
 //! jitter, white-balance error, flash beam profile, vignetting, weak ambient light, sensor
-//! noise, an sRGB or gamma-2.2 tone curve with a mild S-curve, 8-bit JPEG (quality 92) or PNG.
+//! noise, an sRGB or gamma-2.2 tone curve with a mild S-curve, 8-bit JPEG (quality 92) or PNG,
+//! with EXIF recording the 90° lens (so that `photomat capture` needs no `--fov` for them).
 //! `--camera ideal` switches all of it off (exact renderer output, gamma 2.2).
 //! `--max-tilt` and `--flash-offset` hold the phone as a hand does
 //! (`photomat_data::simulator::pose`): a tilted camera and a flash beside the lens; the true

@@ -4,7 +4,7 @@
 //! Photos are quantised to 8 bits by rounding (the same rule as
 //! [`photomat_core::image_io::encode_png`]); JPEGs use baseline encoding at
 //! [`JPEG_QUALITY`] with the `image` crate's encoder, which is deterministic, so equal
-//! pictures give equal bytes. Every file is written atomically. JPEGs carry EXIF recording the
+//! pictures give equal bytes. Every file is written atomically. Photos carry EXIF recording the
 //! simulator's lens ([`TRAINING_FOV_DEGREES`] across, [`crate::dataset::lens`]), so that
 //! `photomat capture` reads the field of view they were taken with, as it does from a phone's.
 
@@ -14,7 +14,7 @@ use std::path::Path;
 use image::codecs::jpeg::JpegEncoder;
 use image::{ExtendedColorType, ImageEncoder};
 use photomat_core::flash::TRAINING_FOV_DEGREES;
-use photomat_core::image_io::{PlanarImage, PngBits, encode_png, write_atomic};
+use photomat_core::image_io::{PlanarImage, PngBits, encode_png_with_exif, write_atomic};
 use photomat_core::{Error, Result};
 
 use super::camera::CameraModel;
@@ -68,7 +68,11 @@ pub fn encode_photo(photo: &PlanarImage, format: PhotoFormat) -> Result<Vec<u8>>
         )));
     }
     match format {
-        PhotoFormat::Png => encode_png(photo, PngBits::Eight),
+        PhotoFormat::Png => encode_png_with_exif(
+            photo,
+            PngBits::Eight,
+            &exif_for_field_of_view(TRAINING_FOV_DEGREES, photo.width, photo.height),
+        ),
         PhotoFormat::Jpeg => {
             let plane = photo.texels();
             // Interleave to HWC; round to the nearest level (`as` maps NaN to 0).
@@ -185,23 +189,25 @@ mod tests {
     }
 
     #[test]
-    fn simulated_jpegs_record_the_simulators_field_of_view_in_exif() {
+    fn simulated_photos_record_the_simulators_field_of_view_in_exif() {
         use crate::dataset::lens::{LensRecord, read_lens};
         use photomat_core::flash::{FLASH_HEIGHT, PHOTO_SIDE};
         // The constant is the geometry's: side 2 seen from height 1.
         let geometric = 2.0 * (PHOTO_SIDE / 2.0 / FLASH_HEIGHT).atan().to_degrees();
         assert!((TRAINING_FOV_DEGREES - geometric).abs() < 1e-12);
-        for size in [16, 512] {
-            let jpeg = encode_photo(&gradient(size), PhotoFormat::Jpeg).unwrap();
-            let lens = read_lens(&jpeg).expect("a simulated JPEG has a lens record");
-            assert!(matches!(lens, LensRecord::FocalPlane { .. }), "{lens:?}");
-            // The rationals keep 10⁻⁶ pixel per cm: far below a thousandth of a degree.
-            let fov = lens.fov_degrees(size, size);
-            assert!((fov - TRAINING_FOV_DEGREES).abs() < 1e-4, "{size}: {fov}");
+        for format in [PhotoFormat::Jpeg, PhotoFormat::Png] {
+            for size in [16, 512] {
+                let bytes = encode_photo(&gradient(size), format).unwrap();
+                let lens = read_lens(&bytes).expect("a simulated photo has a lens record");
+                assert!(matches!(lens, LensRecord::FocalPlane { .. }), "{lens:?}");
+                // The rationals keep 10⁻⁶ pixel per cm: far below a thousandth of a degree.
+                let fov = lens.fov_degrees(size, size);
+                assert!(
+                    (fov - TRAINING_FOV_DEGREES).abs() < 1e-4,
+                    "{format:?} {size}: {fov}"
+                );
+            }
         }
-        // PNGs carry no EXIF.
-        let png = encode_photo(&gradient(16), PhotoFormat::Png).unwrap();
-        assert_eq!(read_lens(&png), None);
     }
 
     #[test]
