@@ -94,9 +94,15 @@ impl std::fmt::Display for LensRecord {
 /// Degrees across the longer side of a `width × height` photo taken at a 35 mm equivalent
 /// focal length of `focal_length_35mm` mm (module docs).
 pub fn fov_from_35mm_equivalent(focal_length_35mm: f64, width: usize, height: usize) -> f64 {
-    let (w, h) = (width as f64, height as f64);
-    let half_long = FULL_FRAME_HALF_DIAGONAL_MM * w.max(h) / w.hypot(h);
+    let half_long = full_frame_half_long_side_mm(width, height);
     2.0 * (half_long / focal_length_35mm).atan().to_degrees()
+}
+
+/// Half the longer side, in mm, of the 36 × 24 mm frame's diagonal laid on a `width × height`
+/// photo: the half-diagonal times `long / √(w² + h²)` (module docs).
+fn full_frame_half_long_side_mm(width: usize, height: usize) -> f64 {
+    let (w, h) = (width as f64, height as f64);
+    FULL_FRAME_HALF_DIAGONAL_MM * w.max(h) / w.hypot(h)
 }
 
 /// The lens record of a photo file (JPEG, PNG, …): the exact one when the EXIF has a positive
@@ -157,8 +163,7 @@ pub fn exif_for_field_of_view(fov_degrees: f64, width: usize, height: usize) -> 
     let tan_half = (fov_degrees / 2.0).to_radians().tan();
     let sensor_long_mm = 2.0 * WRITTEN_FOCAL_LENGTH_MM * tan_half;
     let pixels_per_cm = width.max(height) as f64 / sensor_long_mm * MM_PER_CM;
-    let (w, h) = (width as f64, height as f64);
-    let equivalent_35mm = FULL_FRAME_HALF_DIAGONAL_MM * w.max(h) / w.hypot(h) / tan_half;
+    let equivalent_35mm = full_frame_half_long_side_mm(width, height) / tan_half;
     let rational = |x: f64| exif::Rational {
         num: (x * RATIONAL_DENOMINATOR as f64).round() as u32,
         denom: RATIONAL_DENOMINATOR,

@@ -67,12 +67,9 @@ pub fn encode_photo(photo: &PlanarImage, format: PhotoFormat) -> Result<Vec<u8>>
             photo.channels
         )));
     }
+    let exif = exif_for_field_of_view(TRAINING_FOV_DEGREES, photo.width, photo.height);
     match format {
-        PhotoFormat::Png => encode_png_with_exif(
-            photo,
-            PngBits::Eight,
-            &exif_for_field_of_view(TRAINING_FOV_DEGREES, photo.width, photo.height),
-        ),
+        PhotoFormat::Png => encode_png_with_exif(photo, PngBits::Eight, &exif),
         PhotoFormat::Jpeg => {
             let plane = photo.texels();
             // Interleave to HWC; round to the nearest level (`as` maps NaN to 0).
@@ -83,11 +80,7 @@ pub fn encode_photo(photo: &PlanarImage, format: PhotoFormat) -> Result<Vec<u8>>
             let mut out = Cursor::new(Vec::new());
             let mut encoder = JpegEncoder::new_with_quality(&mut out, JPEG_QUALITY);
             encoder
-                .set_exif_metadata(exif_for_field_of_view(
-                    TRAINING_FOV_DEGREES,
-                    photo.width,
-                    photo.height,
-                ))
+                .set_exif_metadata(exif)
                 .map_err(|e| Error::Invalid(format!("JPEG EXIF: {e}")))?;
             encoder
                 .write_image(
