@@ -94,6 +94,7 @@ pub mod spatial;
 pub mod swd;
 pub mod synthesis;
 pub mod train;
+pub mod waves;
 
 pub use checkpoint::{
     is_buffer, load_checkpoint, parameter_count, save_checkpoint, trainable_vars,
@@ -144,6 +145,8 @@ pub mod limits {
     pub const MAX_LOCAL_DIM: usize = 1024;
     /// Most 1×1 layers of a spatial G's local input (the default: 2).
     pub const MAX_LOCAL_LAYERS: usize = 16;
+    /// Most periodic waves of a spatial G (PSGAN uses a handful).
+    pub const MAX_WAVES: usize = 256;
     /// Largest gain of D's input sharpening (9, ×10 detail, is what was measured; beyond
     /// ×100 the detail's rounding noise would be amplified past the signal).
     pub const MAX_D_INPUT_SHARPEN: f64 = 100.0;
@@ -534,6 +537,14 @@ mod tests {
             },
             GeneratorConfig {
                 w_avg_beta: 1.0,
+                ..Default::default()
+            },
+            GeneratorConfig {
+                tileable: true,
+                spatial: Some(SpatialConfig {
+                    waves: limits::MAX_WAVES + 1,
+                    ..SpatialConfig::default()
+                }),
                 ..Default::default()
             },
         ];

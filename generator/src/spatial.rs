@@ -17,9 +17,11 @@
 //! shifting the field by k cells, and every noise image by the same distance, shifts F by
 //! k·[`cell_size`](crate::GeneratorConfig::cell_size) texels; a field of n×n cells gives F of
 //! n·cell texels, periodic at that side (tileable at any size); a field tiled 2×2 gives F tiled
-//! 2×2. PSGAN's periodic channels are not used: the wrap-around padding already makes every
-//! sample periodic at its own size. Their other role, lattices that repeat across many cells
-//! (tiles, weave), is not covered (docs/neural-models.md, "Regular lattices").
+//! 2×2. PSGAN's periodic channels are optional ([`SpatialConfig::waves`], [`crate::waves`]):
+//! the wrap-around padding already makes every sample periodic at its own size, and the waves
+//! serve the other role, lattices that repeat across many cells (tiles, weave;
+//! docs/neural-models.md, "Regular lattices"). With waves, the shift and tiling properties
+//! above hold for the lattice up to its whole periods (it is anchored at the sample's corner).
 //!
 //! Parameter names under the base block's `vb` (`synthesis.b4`): `input.fc{i}.{weight,bias}`.
 
@@ -46,6 +48,15 @@ pub struct SpatialConfig {
     /// when a run starts (`RunPlan::bind_data`); `None` in a model folder written before.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub texel_size: Option<f64>,
+    /// Periodic channels: plane waves whose wave vectors follow the material's w, added at
+    /// every block ([`crate::waves`]). 0 (the default, and every model folder written before
+    /// they existed): none.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub waves: usize,
+}
+
+fn is_zero(n: &usize) -> bool {
+    *n == 0
 }
 
 impl Default for SpatialConfig {
@@ -54,6 +65,7 @@ impl Default for SpatialConfig {
             local_dim: 32,
             layers: 2,
             texel_size: None,
+            waves: 0,
         }
     }
 }
@@ -61,7 +73,7 @@ impl Default for SpatialConfig {
 impl SpatialConfig {
     /// Checks every field; the error names it.
     pub fn validate(&self) -> Result<()> {
-        use crate::limits::{MAX_LOCAL_DIM, MAX_LOCAL_LAYERS};
+        use crate::limits::{MAX_LOCAL_DIM, MAX_LOCAL_LAYERS, MAX_WAVES};
         if !(1..=MAX_LOCAL_DIM).contains(&self.local_dim) {
             bail!(
                 "spatial.local_dim {} must be in 1 … {MAX_LOCAL_DIM}",
@@ -73,6 +85,9 @@ impl SpatialConfig {
                 "spatial.layers {} must be in 1 … {MAX_LOCAL_LAYERS}",
                 self.layers
             );
+        }
+        if self.waves > MAX_WAVES {
+            bail!("spatial.waves {} must be at most {MAX_WAVES}", self.waves);
         }
         if let Some(t) = self.texel_size
             && !(t.is_finite() && t > 0.0)

@@ -34,9 +34,13 @@
 //!   side n·R/4 ([`Synthesis::forward_field`]), every noise image scaled alike
 //!   ([`Synthesis::noise_shapes_at`]).
 //!
+//! - **Periodic waves** ([`crate::spatial::SpatialConfig::waves`], [`crate::waves`]): a
+//!   spatial G may add plane waves, whose wave vectors follow w, to every block's input.
+//!
 //! Parameter names under the generator's `vb`: `mapping.*` ([`crate::mapping`]) and
 //! `synthesis.b{r}.{const, conv0.*, conv1.*, tofeat.*}` (a spatial G has
-//! `synthesis.b4.input.fc{i}.*` instead of `b4.const`) with, per conv,
+//! `synthesis.b4.input.fc{i}.*` instead of `b4.const`, and with waves `synthesis.waves.*`)
+//! with, per conv,
 //! `affine.{weight,bias}`, `weight`, `noise_strength`, `bias`.
 
 use candle_core::{Result, Tensor, bail};
@@ -49,6 +53,7 @@ use crate::modulated_conv::{ModulatedConv2d, modulated_conv2d};
 use crate::noise::{NoiseInjection, NoiseInput, noise_injection};
 use crate::padding::Padding;
 use crate::spatial::{LocalInput, local_input};
+use crate::waves::{PeriodicWaves, periodic_waves};
 use crate::{BASE_RESOLUTION, GeneratorConfig};
 
 /// Kernel of the synthesis convs.
@@ -206,6 +211,8 @@ pub enum BaseInput {
 pub struct Synthesis {
     base: BaseInput,
     blocks: Vec<SynthesisBlock>,
+    /// A spatial G's periodic channels, added to every block's input ([`crate::waves`]).
+    waves: Option<PeriodicWaves>,
     padding: Padding,
     num_ws: usize,
     latent_dim: usize,
@@ -258,9 +265,29 @@ impl Synthesis {
             });
             res *= 2;
         }
+        let waves = match &cfg.spatial {
+            Some(spatial) if spatial.waves > 0 => {
+                let inputs: Vec<(usize, usize)> = blocks
+                    .iter()
+                    .map(|blk| {
+                        let r = blk.resolution;
+                        (r, cfg.channels_at((r / 2).max(BASE_RESOLUTION)))
+                    })
+                    .collect();
+                Some(periodic_waves(
+                    spatial.waves,
+                    w_dim,
+                    cfg.cell_size(),
+                    &inputs,
+                    vb.pp("waves"),
+                )?)
+            }
+            _ => None,
+        };
         Ok(Self {
             base,
             blocks,
+            waves,
             padding,
             num_ws: cfg.num_ws(),
             latent_dim: cfg.latent_dim,
@@ -276,6 +303,11 @@ impl Synthesis {
     /// What the first block starts from.
     pub fn base_input(&self) -> &BaseInput {
         &self.base
+    }
+
+    /// A spatial G's periodic channels, if it has any.
+    pub fn periodic_waves(&self) -> Option<&PeriodicWaves> {
+        self.waves.as_ref()
     }
 
     /// Whether this is a spatial G (a local latent field instead of the constant).
@@ -412,10 +444,22 @@ impl Synthesis {
                 images.iter().cloned().map(Some).collect()
             }
         };
+        // Whole cycles per side of the sample's waves, from the first layer's w.
+        let cycles = match &self.waves {
+            Some(waves) => {
+                let k = waves.wave_vectors(&ws.narrow(1, 0, 1)?.squeeze(1)?)?;
+                let side = cells * self.config.cell_size();
+                Some(PeriodicWaves::cycles_per_side(&k, side)?)
+            }
+            None => None,
+        };
         let mut x = x.clone();
         let mut img: Option<Tensor> = None;
         let (mut w_idx, mut noise_idx) = (0, 0);
-        for block in &self.blocks {
+        for (i, block) in self.blocks.iter().enumerate() {
+            if let (Some(waves), Some(cycles)) = (&self.waves, &cycles) {
+                x = waves.add_to_block_input(i, &x, cycles)?;
+            }
             let nc = block.num_conv();
             let block_ws = ws.narrow(1, w_idx, nc + 1)?;
             let (nx, nimg) = block.forward(

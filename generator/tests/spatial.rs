@@ -29,6 +29,7 @@ fn spatial_config() -> GeneratorConfig {
             layers: 2,
             // 16² patches of 64² photos: 2/64 world units per texel.
             texel_size: Some(2.0 / 64.0),
+            waves: 0,
         }),
         ..Default::default()
     }

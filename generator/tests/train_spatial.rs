@@ -27,6 +27,9 @@ fn tiny_spatial_config(data: &Path) -> TrainConfig {
         spatial: Some(SpatialConfig {
             local_dim: 4,
             layers: 2,
+            // Periodic waves: their straight-through rounding and their path-length double
+            // backward are part of every step.
+            waves: 2,
             ..SpatialConfig::default()
         }),
         ..Default::default()

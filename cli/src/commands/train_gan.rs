@@ -154,6 +154,13 @@ pub struct Args {
           value_parser = clap::value_parser!(u32).range(1..=4096))]
     pub local_dim: Option<u32>,
 
+    /// Periodic channels of the spatial generator: N plane waves whose wave vectors follow
+    /// the material's style, added at every block, for lattices that repeat across many
+    /// cells (tiles, weave; PSGAN's periodic latents) [default: 0].
+    #[arg(long, value_name = "N", requires = "spatial",
+          value_parser = clap::value_parser!(u32).range(0..=256))]
+    pub waves: Option<u32>,
+
     /// Probability that a training patch holds the photo's highlight [default: 0.5]; under
     /// uniform positions a 64² patch of a 512² photo holds it in about 2 % of draws.
     #[arg(long, value_name = "P", requires = "spatial")]
@@ -221,6 +228,7 @@ impl Args {
             r1_gamma: self.r1_gamma,
             spatial: self.spatial,
             local_dim: self.local_dim.map(|v| v as usize),
+            waves: self.waves.map(|v| v as usize),
             highlight_prob: self.highlight_prob,
             light_mismatch: self.light_mismatch,
             relight_lobes: self.relight_lobes.clone().map(|l| l.0),

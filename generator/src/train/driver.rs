@@ -80,6 +80,8 @@ pub struct GanSettings {
     pub spatial: bool,
     /// Channels of a spatial generator's local latents.
     pub local_dim: Option<usize>,
+    /// Periodic waves of a spatial generator ([`SpatialConfig::waves`]).
+    pub waves: Option<usize>,
     /// Probability that a training patch holds the photo's highlight.
     pub highlight_prob: Option<f64>,
     /// Weight of D's light-mismatch term ([`TrainConfig::light_mismatch`]).
@@ -129,7 +131,7 @@ type FixedField = (
 );
 
 /// Every setting fixed at the start of a run, with its command-line flag.
-pub const RESUME_FIXED: [FixedField; 16] = [
+pub const RESUME_FIXED: [FixedField; 17] = [
     (
         "--d-sharpen",
         "generator.d_input_sharpen",
@@ -187,6 +189,17 @@ pub const RESUME_FIXED: [FixedField; 16] = [
                 .spatial
                 .as_ref()
                 .map_or("none".into(), |s| s.local_dim.to_string())
+        },
+    ),
+    (
+        "--waves",
+        "generator.spatial.waves",
+        |s| s.waves.map(|v| v.to_string()),
+        |c| {
+            c.generator
+                .spatial
+                .as_ref()
+                .map_or("none".into(), |s| s.waves.to_string())
         },
     ),
     (
@@ -592,13 +605,21 @@ fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
         );
     }
     let defaults = GeneratorConfig::default();
-    if !settings.spatial && (settings.local_dim.is_some() || settings.highlight_prob.is_some()) {
-        bail!("--local-dim and --highlight-prob configure a spatial generator: add --spatial");
+    if !settings.spatial
+        && (settings.local_dim.is_some()
+            || settings.waves.is_some()
+            || settings.highlight_prob.is_some())
+    {
+        bail!(
+            "--local-dim, --waves and --highlight-prob configure a spatial generator: add \
+             --spatial"
+        );
     }
     let spatial = settings.spatial.then(|| SpatialConfig {
         local_dim: settings
             .local_dim
             .unwrap_or(SpatialConfig::default().local_dim),
+        waves: settings.waves.unwrap_or(SpatialConfig::default().waves),
         ..SpatialConfig::default()
     });
     let generator = GeneratorConfig {
