@@ -202,6 +202,14 @@ impl EqualizedConv2d {
         photomat_kernels::conv2d(x, &w, spec)
     }
 
+    /// The weight as the layer applies it (stored weight × its run-time gain).
+    ///
+    /// # Shapes
+    /// → (out, in, k, k).
+    pub fn effective_weight(&self) -> Result<Tensor> {
+        self.weight.affine(self.weight_gain, 0.0)
+    }
+
     /// The bias (`None` for a layer without one), shape (out).
     pub fn bias(&self) -> Option<&Tensor> {
         self.bias.as_ref()

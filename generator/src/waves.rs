@@ -157,6 +157,22 @@ impl PeriodicWaves {
         )
     }
 
+    /// How strongly each wave enters each block: the norm of its two columns (`sin`, `cos`)
+    /// in the block's effective projection, per block (in block order) and wave. A wave that
+    /// training left unused has small norms everywhere.
+    pub fn projection_norms(&self) -> Result<Vec<Vec<f64>>> {
+        self.projections
+            .iter()
+            .map(|p| {
+                let w = p.effective_weight()?.to_dtype(candle_core::DType::F64)?;
+                let per_input = w.sqr()?.sum_keepdim(0)?.flatten_all()?.to_vec1::<f64>()?;
+                Ok((0..self.waves)
+                    .map(|j| (per_input[j] + per_input[self.waves + j]).sqrt())
+                    .collect())
+            })
+            .collect()
+    }
+
     /// Block `block`'s input features plus the projection of the waves at their grid, for a
     /// sample `side` texels wide.
     ///
