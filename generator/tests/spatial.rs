@@ -3,6 +3,9 @@
 //! seeded features at any size, M per texel at any size, and old model folders (the fixed-size
 //! G with its learned constant) loading unchanged.
 
+mod tiny_spatial;
+use tiny_spatial::{tiny_spatial_config, with_spatial};
+
 use std::path::Path;
 
 use anyhow::Result;
@@ -11,28 +14,12 @@ use candle_nn::VarMap;
 use photomat_generator::model_files::read_gan_manifest;
 use photomat_generator::synthesis::BaseInput;
 use photomat_generator::{
-    GanModel, Generator, GeneratorConfig, NoiseInput, SpatialConfig, seeded_uniform,
-    seeded_var_builder,
+    GanModel, Generator, GeneratorConfig, NoiseInput, seeded_uniform, seeded_var_builder,
 };
 
-/// 32² training size (cell of 8 texels), 8 channels per block, w of 16, F of 8 channels.
+/// The tiny spatial G with the texel of 16² patches of 64² photos: 2/64 world units.
 fn spatial_config() -> GeneratorConfig {
-    GeneratorConfig {
-        resolution: 32,
-        channel_multiplier: 1.0 / 64.0,
-        latent_dim: 16,
-        feature_channels: 8,
-        relight_hidden: 8,
-        tileable: true,
-        spatial: Some(SpatialConfig {
-            local_dim: 4,
-            layers: 2,
-            // 16² patches of 64² photos: 2/64 world units per texel.
-            texel_size: Some(2.0 / 64.0),
-            waves: 0,
-        }),
-        ..Default::default()
-    }
+    with_spatial(tiny_spatial_config(), |s| s.texel_size = Some(2.0 / 64.0))
 }
 
 /// A seeded spatial G whose noise strengths are 0.5 (they start at 0), so that the noise

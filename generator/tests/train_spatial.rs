@@ -7,33 +7,21 @@
 
 mod training_data;
 use training_data::{second_order, simulated_dataset, snapshot};
+mod tiny_spatial;
+use tiny_spatial::{tiny_spatial_config, with_spatial};
 
 use std::path::Path;
 
 use anyhow::Result;
 use candle_core::Device;
 use photomat_data::source::{DatasetSource, SourceMode};
+use photomat_generator::GanModel;
 use photomat_generator::train::{TrainConfig, Trainer, TrainingData};
-use photomat_generator::{GanModel, GeneratorConfig, SpatialConfig};
 
-fn tiny_spatial_config(data: &Path) -> TrainConfig {
-    let generator = GeneratorConfig {
-        resolution: 32,
-        channel_multiplier: 1.0 / 64.0,
-        latent_dim: 16,
-        feature_channels: 8,
-        relight_hidden: 8,
-        tileable: true,
-        spatial: Some(SpatialConfig {
-            local_dim: 4,
-            layers: 2,
-            // Periodic waves: their straight-through rounding and their path-length double
-            // backward are part of every step.
-            waves: 2,
-            ..SpatialConfig::default()
-        }),
-        ..Default::default()
-    };
+fn tiny_training_config(data: &Path) -> TrainConfig {
+    // Periodic waves: their straight-through rounding and their path-length double backward
+    // are part of every step.
+    let generator = with_spatial(tiny_spatial_config(), |s| s.waves = 2);
     let mut c = TrainConfig::new(generator, data.to_path_buf(), 4, 13);
     c.r1_interval = 2;
     c.lr = 0.01;
@@ -45,7 +33,7 @@ fn spatial_training_on_patches_is_finite_and_resumes_bit_identically() -> Result
     second_order();
     let dir = tempfile::tempdir()?;
     let data_dir = simulated_dataset(dir.path(), 6, 5)?;
-    let mut config = tiny_spatial_config(&data_dir);
+    let mut config = tiny_training_config(&data_dir);
     // Path-length regularisation on every other step: its running mean and the spatial
     // generation of its fakes are part of the state that must repeat.
     config.pl_weight = 2.0;
@@ -117,7 +105,7 @@ fn spatial_training_on_patches_is_finite_and_resumes_bit_identically() -> Result
 
 #[test]
 fn patch_settings_need_a_spatial_generator_and_back() -> Result<()> {
-    let mut config = tiny_spatial_config(Path::new("data"));
+    let mut config = tiny_training_config(Path::new("data"));
     config.validate()?;
     let patches = config.patches.take();
     assert!(

@@ -4,34 +4,28 @@
 //! periodic at its own side, shifts with its field by cells that hold whole periods, and
 //! saves and loads.
 
+mod tiny_spatial;
+use tiny_spatial::{tiny_spatial_config, with_spatial};
+
 use anyhow::Result;
 use candle_core::{DType, Device, IndexOp, Tensor, Var};
 use candle_nn::VarMap;
 use photomat_generator::model_files::read_gan_manifest;
 use photomat_generator::waves::PeriodicWaves;
 use photomat_generator::{
-    GanModel, Generator, GeneratorConfig, NoiseInput, SpatialConfig, seeded_uniform,
-    seeded_var_builder,
+    GanModel, Generator, GeneratorConfig, NoiseInput, seeded_uniform, seeded_var_builder,
 };
 
-/// 32² training size (cell of 8 texels), 8 channels per block, w of 16, two waves.
+/// The tiny spatial G (cell of 8 texels) without noise inputs, with two waves.
 fn config_with_waves() -> GeneratorConfig {
-    GeneratorConfig {
-        resolution: 32,
-        channel_multiplier: 1.0 / 64.0,
-        latent_dim: 16,
-        feature_channels: 8,
-        relight_hidden: 8,
-        tileable: true,
+    let config = GeneratorConfig {
         noise_inputs: false,
-        spatial: Some(SpatialConfig {
-            local_dim: 4,
-            texel_size: Some(2.0 / 64.0),
-            waves: 2,
-            ..SpatialConfig::default()
-        }),
-        ..Default::default()
-    }
+        ..tiny_spatial_config()
+    };
+    with_spatial(config, |s| {
+        s.texel_size = Some(2.0 / 64.0);
+        s.waves = 2;
+    })
 }
 
 /// A seeded G with waves whose wave vectors are fixed at `cycles_per_cell` (x, y) per wave
@@ -115,8 +109,7 @@ fn generator_with_waves_is_periodic_at_its_side_at_every_size() -> Result<()> {
     );
     // The waves matter: without them F differs.
     let vars = VarMap::new();
-    let mut plain_cfg = config_with_waves();
-    plain_cfg.spatial.as_mut().expect("spatial").waves = 0;
+    let plain_cfg = with_spatial(config_with_waves(), |s| s.waves = 0);
     let plain = Generator::new(&plain_cfg, seeded_var_builder(&vars, 3, DType::F32, &dev))?;
     let without = plain.forward_field(&z, &field, 1.0, &NoiseInput::Zero)?;
     assert!(max_abs(&(f - without)?)? > 1e-2);
