@@ -444,12 +444,12 @@ impl Synthesis {
                 images.iter().cloned().map(Some).collect()
             }
         };
-        // Whole cycles per side of the sample's waves, from the first layer's w.
-        let cycles = match &self.waves {
+        // The waves with their whole cycles per side of the sample, from the first layer's w.
+        let waves = match &self.waves {
             Some(waves) => {
                 let k = waves.wave_vectors(&ws.narrow(1, 0, 1)?.squeeze(1)?)?;
                 let side = cells * self.config.cell_size();
-                Some(PeriodicWaves::cycles_per_side(&k, side)?)
+                Some((waves, PeriodicWaves::cycles_per_side(&k, side)?))
             }
             None => None,
         };
@@ -457,7 +457,7 @@ impl Synthesis {
         let mut img: Option<Tensor> = None;
         let (mut w_idx, mut noise_idx) = (0, 0);
         for (i, block) in self.blocks.iter().enumerate() {
-            if let (Some(waves), Some(cycles)) = (&self.waves, &cycles) {
+            if let Some((waves, cycles)) = &waves {
                 x = waves.add_to_block_input(i, &x, cycles)?;
             }
             let nc = block.num_conv();

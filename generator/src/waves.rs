@@ -58,8 +58,8 @@ pub struct PeriodicWaves {
     cell_size: usize,
 }
 
-/// Builds the [`PeriodicWaves`] of `waves` waves for a G whose block `i` takes
-/// `block_input_channels[i]` channels, under `vb` (`affine`, `b{resolutions[i]}`).
+/// Builds the [`PeriodicWaves`] of `waves` waves for a G whose blocks are `blocks`, each as
+/// (its resolution r, the channels of its input), under `vb` (`affine`, `b{r}`).
 pub fn periodic_waves(
     waves: usize,
     w_dim: usize,
