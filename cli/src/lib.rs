@@ -32,6 +32,7 @@
 //! - `photomat train-gan --data DATASET --out RUN (--steps N | --kimg K) [--size 64] [--tileable]
 //!   [--resume]`: G, M and D on flash photos; RUN is a GAN model folder;
 //! - `photomat eval-gan --gan RUN --data DATASET`: sliced Wasserstein distance to real crops;
+//! - `photomat rank-snapshots RUN`: a run's snapshots ranked by their SWD over several seeds;
 //! - `photomat relight --gan RUN --seed S --orbit N --out FILE.png [--gif F]`: one neural
 //!   material under moving flashes;
 //! - `photomat train-estimator --gan RUN --brdf SPEC --out MODEL`: E for any registered model;
@@ -84,6 +85,8 @@ enum Command {
     TrainGan(commands::train_gan::Args),
     /// Sliced Wasserstein distance between a GAN's relit samples and a dataset's real crops.
     EvalGan(commands::eval_gan::Args),
+    /// Rank a GAN run's snapshots by their SWD to the data set over several seeds.
+    RankSnapshots(commands::rank_snapshots::Args),
     /// Relight one neural material of a trained GAN under an orbit of flash positions.
     Relight(commands::relight::Args),
     /// Train the map estimator E for a named BRDF model against a frozen GAN.
@@ -112,6 +115,7 @@ impl Command {
             Command::EvalDetector(args) => commands::eval_detector::run(args, out),
             Command::TrainGan(args) => commands::train_gan::run(args, out),
             Command::EvalGan(args) => commands::eval_gan::run(args, out),
+            Command::RankSnapshots(args) => commands::rank_snapshots::run(args, out),
             Command::Relight(args) => commands::relight::run(args, out),
             Command::TrainEstimator(args) => commands::train_estimator::run(args, out),
             Command::Sample(args) => commands::sample::run(args, out),

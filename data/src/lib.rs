@@ -16,4 +16,5 @@ pub mod procedural;
 pub mod relief_signature;
 pub mod sampler;
 pub mod simulator;
+pub mod snapshots;
 pub mod source;

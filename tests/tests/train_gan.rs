@@ -340,3 +340,105 @@ fn eval_gan_discriminator_probe_reads_the_runs_d() {
     let err = format!("{:#}", eval(&gan_only, "1", false).unwrap_err());
     assert!(err.contains("train-gan` run folder"), "{err}");
 }
+
+/// `train-gan --snapshot-every` keeps G_ema + M of each cadence step as a model folder, and
+/// `rank-snapshots` orders them by the mean over seeds of the figure `eval-gan` reports for
+/// each seed, writes the ranking into the run and copies the best snapshot out.
+#[test]
+fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
+    second_order();
+    let dir = tempfile::tempdir().unwrap();
+    let data = simulated_dataset(dir.path(), 64);
+    let data = path_str(&data).to_string();
+    let run = dir.path().join("run");
+    let flags: Vec<&str> = TINY
+        .iter()
+        .copied()
+        .chain(["--steps", "3", "--snapshot-every", "1", "--swd-every", "0"])
+        .collect();
+    train(Some(&data), &run, &flags).unwrap();
+    let snapshot = |step: u64| run.join(format!("snapshots/step-{step:06}"));
+    for step in 1..=3 {
+        let manifest: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(snapshot(step).join("gan.json")).unwrap())
+                .unwrap();
+        assert_eq!(manifest["provenance"]["step"], step);
+    }
+    // The last snapshot is the model the run ends with.
+    assert_eq!(
+        std::fs::read(snapshot(3).join("gan.safetensors")).unwrap(),
+        std::fs::read(run.join("gan.safetensors")).unwrap()
+    );
+
+    let best = dir.path().join("best");
+    let printed = photomat(&[
+        "rank-snapshots",
+        path_str(&run),
+        "--seeds",
+        "2",
+        "--count",
+        "8",
+        "--best-to",
+        path_str(&best),
+        "--json",
+    ])
+    .unwrap();
+    let report: serde_json::Value = serde_json::from_str(&printed).unwrap();
+    let written: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(run.join("snapshots/ranking.json")).unwrap())
+            .unwrap();
+    assert_eq!(report, written);
+    let ranking = report["ranking"].as_array().unwrap();
+    assert_eq!(ranking.len(), 3);
+    let means: Vec<f64> = ranking
+        .iter()
+        .map(|r| r["mean"].as_f64().unwrap())
+        .collect();
+    assert!(means.windows(2).all(|m| m[0] <= m[1]), "{means:?}");
+    for entry in ranking {
+        let folder = entry["folder"].as_str().unwrap();
+        let per_seed: Vec<f64> = entry["swd_per_seed"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        for (seed, value) in per_seed.iter().enumerate() {
+            let eval: serde_json::Value = serde_json::from_str(
+                &photomat(&[
+                    "eval-gan",
+                    "--gan",
+                    folder,
+                    "--data",
+                    &data,
+                    "--count",
+                    "8",
+                    "--seed",
+                    &seed.to_string(),
+                    "--json",
+                ])
+                .unwrap(),
+            )
+            .unwrap();
+            assert_eq!(
+                eval["mean_x1e3"].as_f64().unwrap(),
+                *value,
+                "{folder} seed {seed}"
+            );
+        }
+        let mean = per_seed.iter().sum::<f64>() / 2.0;
+        assert!((entry["mean"].as_f64().unwrap() - mean).abs() < 1e-12);
+    }
+    let best_folder = Path::new(ranking[0]["folder"].as_str().unwrap());
+    assert_eq!(
+        std::fs::read(best.join("gan.safetensors")).unwrap(),
+        std::fs::read(best_folder.join("gan.safetensors")).unwrap()
+    );
+
+    // A run without snapshots says how to keep them.
+    let plain = dir.path().join("plain");
+    let flags: Vec<&str> = TINY.iter().copied().chain(["--steps", "1"]).collect();
+    train(Some(&data), &plain, &flags).unwrap();
+    let err = photomat_error(&["rank-snapshots", path_str(&plain)]);
+    assert!(err.contains("--snapshot-every"), "{err}");
+}

@@ -9,6 +9,7 @@ pub mod eval_detector;
 pub mod eval_gan;
 pub mod map_stats;
 pub mod prepare;
+pub mod rank_snapshots;
 pub mod relight;
 pub mod render;
 pub mod sample;

@@ -185,6 +185,13 @@ pub struct Args {
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
     pub swd_count: Option<u64>,
 
+    /// Steps between snapshots of G_ema + M, each a model folder RUN/snapshots/step-NNNNNN/
+    /// (0: none; about 2 MB each for the bundled recipe). The model's quality swings between
+    /// checkpoints, so keep snapshots and pick one with `photomat rank-snapshots` [default:
+    /// 0; on --resume the run's].
+    #[arg(long, value_name = "N")]
+    pub snapshot_every: Option<u64>,
+
     /// Continue the run in RUN from its last checkpoint.
     #[arg(long)]
     pub resume: bool,
@@ -239,6 +246,7 @@ impl Args {
             sample_every: self.sample_every,
             swd_every: self.swd_every,
             swd_count: self.swd_count,
+            snapshot_every: self.snapshot_every,
         }
     }
 
@@ -312,6 +320,9 @@ fn show(bar: &ProgressBar, event: GanEvent<'_>) {
                 "warning: no checkpoint after step {step}: {reason}; the previous one is kept"
             )
         }),
+        GanEvent::SnapshotHeld { step, reason } => {
+            bar.suspend(|| eprintln!("warning: no snapshot after step {step}: {reason}"))
+        }
         GanEvent::SwdStarted { count } => {
             bar.set_message(format!("measuring SWD on {count} images"))
         }

@@ -98,6 +98,12 @@ pub struct Cadence {
     pub swd_every: u64,
     /// Fakes and real crops per SWD measurement; at least 1.
     pub swd_count: u64,
+    /// Steps between snapshots of G_ema + M, each a GAN model folder
+    /// `snapshots/step-NNNNNN/` of the run (0: none; absent from older `train.json` files).
+    /// A run's quality swings between checkpoints a thousand steps apart, so the model to keep
+    /// is picked afterwards by measuring the snapshots (`photomat_data::snapshots`).
+    #[serde(default)]
+    pub snapshot_every: u64,
 }
 
 impl Default for Cadence {
@@ -107,6 +113,7 @@ impl Default for Cadence {
             sample_every: 500,
             swd_every: 1000,
             swd_count: 64,
+            snapshot_every: 0,
         }
     }
 }

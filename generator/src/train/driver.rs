@@ -18,7 +18,8 @@
 //! (docs/robustness.md).
 //!
 //! The run folder holds `train.json` + `train_state.safetensors` (every checkpoint), the GAN
-//! model folder `gan.json` + `gan.safetensors`, `log.csv` and `samples/step-NNNNNN.png`.
+//! model folder `gan.json` + `gan.safetensors`, `log.csv`, `samples/step-NNNNNN.png` and, with a
+//! snapshot cadence, `snapshots/step-NNNNNN/` (G_ema + M of that step, a model folder).
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -105,6 +106,8 @@ pub struct GanSettings {
     pub swd_every: Option<u64>,
     /// Images per SWD measurement ([`Cadence::swd_count`]).
     pub swd_count: Option<u64>,
+    /// Steps between snapshots of G_ema + M ([`Cadence::snapshot_every`]).
+    pub snapshot_every: Option<u64>,
 }
 
 impl GanSettings {
@@ -115,6 +118,7 @@ impl GanSettings {
             sample_every: self.sample_every.unwrap_or(cadence.sample_every),
             swd_every: self.swd_every.unwrap_or(cadence.swd_every),
             swd_count: self.swd_count.unwrap_or(cadence.swd_count),
+            snapshot_every: self.snapshot_every.unwrap_or(cadence.snapshot_every),
         }
     }
 }
@@ -333,6 +337,8 @@ pub enum GanEvent<'a> {
     /// The checkpoint after step `step` was not written: the state is not sound (a skipped
     /// update or non-finite weights), so the previous checkpoint stays the last good one.
     CheckpointHeld { step: u64, reason: &'a str },
+    /// The snapshot after step `step` was not written, for the same reason.
+    SnapshotHeld { step: u64, reason: &'a str },
     /// An SWD measurement of `count` images starts.
     SwdStarted { count: u64 },
     /// The SWD measurement progressed.
@@ -511,6 +517,10 @@ impl GanTraining {
             if done.is_multiple_of(self.trainer.config().cadence.checkpoint_every) {
                 self.checkpoint_if_sound(progress)?;
             }
+            let snapshot_every = self.trainer.config().cadence.snapshot_every;
+            if snapshot_every > 0 && done.is_multiple_of(snapshot_every) {
+                self.snapshot_if_sound(progress)?;
+            }
             if stop.load(Ordering::SeqCst) {
                 interrupted = true;
                 break;
@@ -542,6 +552,23 @@ impl GanTraining {
                 Ok(())
             }
         }
+    }
+
+    /// Writes G_ema + M as the model folder [`snapshot_folder`] of this step unless the state
+    /// is unsound (then `progress` hears why and no snapshot is written for this step).
+    fn snapshot_if_sound(&self, progress: &mut dyn FnMut(GanEvent<'_>)) -> anyhow::Result<()> {
+        let step = self.trainer.steps_done();
+        if let Some(reason) = self.trainer.unsound_state()? {
+            progress(GanEvent::SnapshotHeld {
+                step,
+                reason: &reason,
+            });
+            return Ok(());
+        }
+        let dir = snapshot_folder(&self.run, step);
+        self.trainer
+            .save_model(&dir, provenance(&self.trainer))
+            .with_context(|| format!("cannot save the snapshot {}", dir.display()))
     }
 
     /// The SWD×10³ of G_ema when step `done` is on the SWD cadence.
@@ -722,9 +749,13 @@ fn resumed_config(run: &Path, settings: &GanSettings) -> anyhow::Result<RunPlan>
     let cadence = settings.cadence_over(saved.cadence);
     if cadence != saved.cadence {
         notes.push(format!(
-            "note: checkpoints every {}, samples every {}, SWD every {} steps on {} images \
-             from here on",
-            cadence.checkpoint_every, cadence.sample_every, cadence.swd_every, cadence.swd_count
+            "note: checkpoints every {}, samples every {}, SWD every {} steps on {} images, \
+             snapshots every {} steps (0: none) from here on",
+            cadence.checkpoint_every,
+            cadence.sample_every,
+            cadence.swd_every,
+            cadence.swd_count,
+            cadence.snapshot_every
         ));
         saved.cadence = cadence;
     }
@@ -750,6 +781,15 @@ fn provenance(trainer: &Trainer) -> serde_json::Value {
         "batch": c.batch,
     })
 }
+
+/// The snapshot folder of step `step` in the run folder `run`: `snapshots/step-NNNNNN`, a GAN
+/// model folder (gan.json + gan.safetensors) of G_ema + M after that step.
+pub fn snapshot_folder(run: &Path, step: u64) -> PathBuf {
+    run.join(SNAPSHOTS_DIR).join(format!("step-{step:06}"))
+}
+
+/// The folder of a run's snapshots ([`Cadence::snapshot_every`]).
+pub const SNAPSHOTS_DIR: &str = "snapshots";
 
 /// Writes the training state and the GAN model folder into `run`.
 fn checkpoint(trainer: &Trainer, run: &Path) -> anyhow::Result<()> {

@@ -30,7 +30,10 @@ pub mod trainer;
 
 pub use config::{Cadence, PatchTraining, TrainConfig};
 pub use data::{FlashPlacement, RealBatch, TrainingData};
-pub use driver::{GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan};
+pub use driver::{
+    GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan, SNAPSHOTS_DIR,
+    snapshot_folder,
+};
 pub use trainer::{
     PhaseSeconds, StepStats, Trainer, enable_second_order_gradients, fresh_discriminator,
 };

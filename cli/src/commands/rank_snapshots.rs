@@ -1,0 +1,154 @@
+//! `photomat rank-snapshots RUN [--data DATASET] [--seeds 4] [--count 64] [--best-to DIR]
+//! [--json]`: the snapshots a `train-gan --snapshot-every N` run kept, ranked by their SWD to
+//! the data set averaged over several seeds (`photomat_data::snapshots`), so that the model to
+//! keep is the best measured one rather than the last one. Writes
+//! `RUN/snapshots/ranking.json`; `--best-to DIR` copies the best snapshot there as a model
+//! folder (what `train-estimator --gan` and `sample --model` take).
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::Context;
+use photomat_core::image_io::write_atomic;
+use photomat_data::snapshots::{ScoreSettings, SnapshotScore, ranked, run_snapshots, score_models};
+use photomat_generator::model_files::{GAN_MANIFEST_FILE, GAN_WEIGHTS_FILE};
+use photomat_generator::train::SNAPSHOTS_DIR;
+use photomat_generator::train::state::read_config;
+
+use crate::common::progress_bar;
+
+/// The ranking's file in the run's snapshot folder.
+const RANKING_FILE: &str = "ranking.json";
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// A `photomat train-gan` run folder that kept snapshots (RUN/snapshots/step-NNNNNN/).
+    #[arg(value_name = "RUN")]
+    pub run: PathBuf,
+
+    /// Prepared data set whose patches are the reference [default: the run's, from
+    /// RUN/train.json].
+    #[arg(long, value_name = "DATASET")]
+    pub data: Option<PathBuf>,
+
+    /// Seeds per snapshot (0 … N−1), one SWD each. One seed can misrank: two seeds of one
+    /// model differ by up to 40 % at 64 images (docs/benchmarks.md, "Picking a snapshot").
+    #[arg(long, value_name = "N", default_value_t = 4,
+          value_parser = clap::value_parser!(u64).range(1..=64))]
+    pub seeds: u64,
+
+    /// Relit samples and real patches per seed (as `eval-gan --count`). About 40 s per seed
+    /// and snapshot for the bundled recipe on one core at 64.
+    #[arg(long, value_name = "N", default_value_t = 64,
+          value_parser = clap::value_parser!(u64).range(1..=16_384))]
+    pub count: u64,
+
+    /// Copy the best snapshot's gan.json + gan.safetensors into this folder (created if
+    /// missing).
+    #[arg(long, value_name = "DIR")]
+    pub best_to: Option<PathBuf>,
+
+    /// Print the ranking as JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
+    let folders = run_snapshots(&args.run)?;
+    let data = match &args.data {
+        Some(data) => data.clone(),
+        None => {
+            read_config(&args.run)
+                .context("give the data set with --data DATASET")?
+                .data
+        }
+    };
+    let settings = ScoreSettings {
+        data,
+        count: args.count as usize,
+        seeds: (0..args.seeds).collect(),
+    };
+    let bar = progress_bar(
+        folders.len() as u64 * args.seeds,
+        "{elapsed_precise} [{bar:40}] {pos}/{len} SWD measurements ({eta} left)",
+    );
+    let per_model = args.seeds;
+    let scores = score_models(&folders, &settings, &mut |model, seeds_done| {
+        bar.set_position(model as u64 * per_model + seeds_done as u64)
+    });
+    bar.finish_and_clear();
+    let scores = ranked(scores.with_context(|| {
+        format!(
+            "cannot score the snapshots of '{}' against '{}'",
+            args.run.display(),
+            settings.data.display()
+        )
+    })?);
+
+    let report = serde_json::json!({
+        "data": settings.data,
+        "count": settings.count,
+        "seeds": settings.seeds,
+        "ranking": scores,
+    });
+    let text = serde_json::to_string_pretty(&report)?;
+    let ranking_path = args.run.join(SNAPSHOTS_DIR).join(RANKING_FILE);
+    write_atomic(&ranking_path, text.as_bytes())
+        .with_context(|| format!("cannot write {}", ranking_path.display()))?;
+
+    let best = &scores[0];
+    if let Some(dir) = &args.best_to {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        for file in [GAN_MANIFEST_FILE, GAN_WEIGHTS_FILE] {
+            let bytes = std::fs::read(best.folder.join(file))
+                .with_context(|| format!("cannot read {}", best.folder.join(file).display()))?;
+            write_atomic(&dir.join(file), &bytes)
+                .with_context(|| format!("cannot write {}", dir.join(file).display()))?;
+        }
+    }
+    if args.json {
+        writeln!(out, "{text}")?;
+    } else {
+        print_table(&scores, &settings.seeds, out)?;
+        writeln!(out, "ranking written to {}", ranking_path.display())?;
+        if let Some(dir) = &args.best_to {
+            writeln!(
+                out,
+                "best: {} copied to {}",
+                best.folder.display(),
+                dir.display()
+            )?;
+        }
+    }
+    Ok(())
+}
+
+/// The ranking as a table, best first.
+fn print_table(scores: &[SnapshotScore], seeds: &[u64], out: &mut dyn Write) -> anyhow::Result<()> {
+    let seed_heads: String = seeds
+        .iter()
+        .map(|s| format!(" {:>8}", format!("seed {s}")))
+        .collect();
+    writeln!(
+        out,
+        "SWD ×10³ of each snapshot against the data set's patches (lower is closer)\n{:>4} {:>8} {:>7}{} {:>8}  folder",
+        "rank", "step", "kimg", seed_heads, "mean"
+    )?;
+    for (rank, score) in scores.iter().enumerate() {
+        let cells: String = score
+            .swd_per_seed
+            .iter()
+            .map(|v| format!(" {v:>8.1}"))
+            .collect();
+        let step = score.step.map_or("–".to_string(), |s| s.to_string());
+        let kimg = score.kimg.map_or("–".to_string(), |k| format!("{k:.1}"));
+        writeln!(
+            out,
+            "{:>4} {step:>8} {kimg:>7}{cells} {:>8.1}  {}",
+            rank + 1,
+            score.mean,
+            score.folder.display()
+        )?;
+    }
+    Ok(())
+}
