@@ -8,17 +8,67 @@
 //! each on several seeds of the SWD against the run's data set ([`model_swd`], the figure
 //! `eval-gan` reports for a seed: relit native-scale windows against real patches, ProGAN's
 //! sliced Wasserstein distance), then ranks them by the mean over the seeds.
+//!
+//! Each measurement is kept in the model folder ([`SCORES_FILE`], keyed by data set, count and
+//! seed, and valid while the folder's weights file is unchanged), so ranking again as a run
+//! adds snapshots, with more seeds, or after an interruption measures only what is new.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Result, bail};
+use photomat_core::image_io::write_atomic;
+use photomat_core::paths::absolute;
 use photomat_generator::GanModel;
-use photomat_generator::model_files::{GAN_MANIFEST_FILE, read_gan_manifest};
+use photomat_generator::model_files::{GAN_MANIFEST_FILE, GAN_WEIGHTS_FILE, read_gan_manifest};
 use photomat_generator::swd::{FakeWindows, SwdConfig, model_swd};
 use photomat_generator::train::SNAPSHOTS_DIR;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::source::DatasetSource;
+
+/// The file in a model folder that keeps the SWDs measured of it.
+pub const SCORES_FILE: &str = "swd_scores.json";
+
+/// The measurements kept in a model folder: SWD ×10³ by [`score_key`], for the weights file
+/// whose [`weights_fingerprint`] is `weights`.
+#[derive(Debug, Default, Serialize, Deserialize)]
+struct KeptScores {
+    weights: String,
+    swd: BTreeMap<String, f64>,
+}
+
+/// The key of one measurement: the data set (as an absolute path), the count and the seed.
+fn score_key(data: &Path, count: usize, seed: u64) -> String {
+    format!("{}|count={count}|seed={seed}", absolute(data).display())
+}
+
+/// Length and modification time of the folder's weights file: a rewritten snapshot (a run
+/// resumed from an earlier checkpoint with other settings) invalidates what was kept.
+fn weights_fingerprint(folder: &Path) -> Result<String> {
+    let path = folder.join(GAN_WEIGHTS_FILE);
+    let meta = std::fs::metadata(&path)
+        .map_err(|e| candle_core::Error::msg(format!("{}: {e}", path.display())))?;
+    let modified = meta
+        .modified()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map_or(0, |d| d.as_nanos());
+    Ok(format!("{} bytes, modified {modified} ns", meta.len()))
+}
+
+/// What `folder` keeps for its current weights (nothing if the file is missing, unreadable or
+/// for other weights).
+fn kept_scores(folder: &Path, weights: &str) -> KeptScores {
+    std::fs::read(folder.join(SCORES_FILE))
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<KeptScores>(&bytes).ok())
+        .filter(|kept| kept.weights == weights)
+        .unwrap_or_else(|| KeptScores {
+            weights: weights.to_string(),
+            swd: BTreeMap::new(),
+        })
+}
 
 /// One model folder's SWD on every seed.
 #[derive(Debug, Clone, Serialize)]
@@ -100,19 +150,36 @@ pub fn score_models(
             let model = GanModel::load(folder, &device).map_err(in_folder)?;
             let provenance = read_gan_manifest(folder).map_err(in_folder)?.provenance;
             let data = DatasetSource::for_model(&settings.data, model.config())?;
+            let weights = weights_fingerprint(folder)?;
+            let mut kept = kept_scores(folder, &weights);
             let mut swd_per_seed = Vec::with_capacity(settings.seeds.len());
             for (done, &seed) in settings.seeds.iter().enumerate() {
-                let report = model_swd(
-                    &model,
-                    &data,
-                    settings.count,
-                    seed,
-                    FakeWindows::Native,
-                    &SwdConfig::default(),
-                    &mut |_, _| {},
-                )
-                .map_err(in_folder)?;
-                swd_per_seed.push(report.mean);
+                let key = score_key(&settings.data, settings.count, seed);
+                let swd = match kept.swd.get(&key) {
+                    Some(&swd) => swd,
+                    None => {
+                        let swd = model_swd(
+                            &model,
+                            &data,
+                            settings.count,
+                            seed,
+                            FakeWindows::Native,
+                            &SwdConfig::default(),
+                            &mut |_, _| {},
+                        )
+                        .map_err(in_folder)?
+                        .mean;
+                        kept.swd.insert(key, swd);
+                        let text = serde_json::to_string_pretty(&kept)
+                            .map_err(candle_core::Error::wrap)?;
+                        let path = folder.join(SCORES_FILE);
+                        write_atomic(&path, text.as_bytes()).map_err(|e| {
+                            candle_core::Error::msg(format!("cannot write {}: {e}", path.display()))
+                        })?;
+                        swd
+                    }
+                };
+                swd_per_seed.push(swd);
                 progress(index, done + 1);
             }
             let mean = swd_per_seed.iter().sum::<f64>() / swd_per_seed.len() as f64;

@@ -435,6 +435,57 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
         std::fs::read(best_folder.join("gan.safetensors")).unwrap()
     );
 
+    // Every measurement is kept in its snapshot: ranking again with a third seed measures only
+    // that one (a kept value, altered here, is reported as kept), and a rewritten weights
+    // file discards what was kept for the old weights.
+    let first = snapshot(1);
+    let kept_path = first.join("swd_scores.json");
+    let mut kept: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(&kept_path).unwrap()).unwrap();
+    let scores = kept["swd"].as_object_mut().unwrap();
+    assert_eq!(scores.len(), 2, "{scores:?}");
+    let seed0 = scores
+        .keys()
+        .find(|k| k.ends_with("seed=0"))
+        .unwrap()
+        .clone();
+    scores.insert(seed0, serde_json::json!(1.5));
+    std::fs::write(&kept_path, serde_json::to_vec(&kept).unwrap()).unwrap();
+    let rank = |seeds: &str| -> Vec<f64> {
+        let printed = photomat(&[
+            "rank-snapshots",
+            path_str(&run),
+            "--seeds",
+            seeds,
+            "--count",
+            "8",
+            "--json",
+        ])
+        .unwrap();
+        let report: serde_json::Value = serde_json::from_str(&printed).unwrap();
+        let entry = report["ranking"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["step"] == 1)
+            .unwrap()
+            .clone();
+        entry["swd_per_seed"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect()
+    };
+    let three = rank("3");
+    assert_eq!(three.len(), 3);
+    assert_eq!(three[0], 1.5);
+    let weights = std::fs::read(first.join("gan.safetensors")).unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(50));
+    std::fs::write(first.join("gan.safetensors"), &weights).unwrap();
+    let measured = rank("1");
+    assert!(measured[0] != 1.5 && measured[0] > 0.0, "{measured:?}");
+
     // A run without snapshots says how to keep them.
     let plain = dir.path().join("plain");
     let flags: Vec<&str> = TINY.iter().copied().chain(["--steps", "1"]).collect();

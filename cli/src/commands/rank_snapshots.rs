@@ -3,7 +3,9 @@
 //! the data set averaged over several seeds (`photomat_data::snapshots`), so that the model to
 //! keep is the best measured one rather than the last one. Writes
 //! `RUN/snapshots/ranking.json`; `--best-to DIR` copies the best snapshot there as a model
-//! folder (what `train-estimator --gan` and `sample --model` take).
+//! folder (what `train-estimator --gan` and `sample --model` take). Each measurement is kept in
+//! its snapshot (`swd_scores.json`), so ranking again while the run adds snapshots, with more
+//! seeds, or after Ctrl-C measures only what is new.
 
 use std::io::Write;
 use std::path::PathBuf;
