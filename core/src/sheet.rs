@@ -1,6 +1,7 @@
 //! Sheets of equal-size images: the one grid layout behind every PNG sheet photomat writes
 //! (sample contact sheets, training panels and sample grids, orbit sheets), and the square
-//! resize that fits renders and map previews to a sheet's tile size.
+//! resize that fits renders and map previews to a sheet's tile size, and the centre crop that
+//! shows a large image's texels one to one in a tile.
 //!
 //! Tiles are laid out left to right, top to bottom, [`CONTACT_SHEET_GAP`] pixels of a
 //! background value between them and no outer border.
@@ -109,9 +110,57 @@ pub fn resize_square(image: &PlanarImage, side: usize) -> PlanarImage {
     out
 }
 
+/// The `side`×`side` window at the centre of a square `image`, texel for texel (a large
+/// material's fine structure, which [`resize_square`] averages away in a small tile); an image
+/// no larger than `side` is [`resize_square`]d instead.
+///
+/// # Shapes
+/// (C, n, n) → (C, side, side); the window starts at row and column (n − side)/2 (rounded
+/// down).
+pub fn centre_crop(image: &PlanarImage, side: usize) -> PlanarImage {
+    let (h, w) = (image.height, image.width);
+    if h <= side || w <= side {
+        return resize_square(image, side);
+    }
+    let (top, left) = ((h - side) / 2, (w - side) / 2);
+    let mut out = PlanarImage::filled(image.channels, side, side, 0.0);
+    for c in 0..image.channels {
+        for y in 0..side {
+            let src = (c * h + top + y) * w + left;
+            out.data[(c * side + y) * side..(c * side + y + 1) * side]
+                .copy_from_slice(&image.data[src..src + side]);
+        }
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn centre_crop_keeps_the_central_texels_one_to_one() {
+        // Texel value = 1000·c + 100·row + col, so every texel says where it came from.
+        let (c, n, side) = (2, 9, 4);
+        let data = (0..c * n * n)
+            .map(|i| (1000 * (i / (n * n)) + 100 * (i / n % n) + i % n) as f32)
+            .collect();
+        let image = PlanarImage::new(c, n, n, data).unwrap();
+        let crop = centre_crop(&image, side);
+        assert_eq!((crop.channels, crop.height, crop.width), (c, side, side));
+        // (9 − 4)/2 = 2: rows and columns 2 … 5.
+        for ch in 0..c {
+            for y in 0..side {
+                for x in 0..side {
+                    let expected = (1000 * ch + 100 * (y + 2) + x + 2) as f32;
+                    assert_eq!(crop.get(ch, y, x), expected);
+                }
+            }
+        }
+        // No larger than the tile: resized like any other tile.
+        let small = PlanarImage::new(1, 2, 2, vec![0.0, 1.0, 2.0, 3.0]).unwrap();
+        assert_eq!(centre_crop(&small, 4).data, resize_square(&small, 4).data);
+    }
 
     #[test]
     fn contact_sheet_grid_is_near_square() {

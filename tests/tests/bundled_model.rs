@@ -9,8 +9,10 @@
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, IndexOp};
+use photomat_core::image_io::{CONTACT_SHEET_GAP, read_png};
 use photomat_core::map_files::load_maps;
 use photomat_estimator::EstimatorModel;
+use photomat_estimator::sample::SHEET_MAX_TILE;
 use photomat_generator::GanModel;
 use photomat_tests::mean_abs_difference;
 
@@ -84,6 +86,28 @@ fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
         l1.is_finite() && l1 < MAX_L1_IN_REACH,
         "analytic vs neural L1 within a photo's reach {l1}"
     );
+
+    // The contact sheet: per row 5 map previews, the diffuse map's centre at one texel per
+    // pixel (a 512² material is larger than a 128² tile), 5 analytic and 5 neural renders.
+    let (sheet, _) = read_png(&out.path().join("contact_sheet.png")).unwrap();
+    let (tile, gap) = (SHEET_MAX_TILE, CONTACT_SHEET_GAP);
+    assert_eq!(
+        (sheet.height, sheet.width),
+        (2 * tile + gap, 16 * tile + 15 * gap)
+    );
+    let (diffuse, _) = read_png(&out.path().join("seed-0000/material/diffuse.png")).unwrap();
+    let from = (diffuse.width - tile) / 2;
+    let mut worst = 0.0f32;
+    for c in 0..3 {
+        for y in 0..tile {
+            for x in 0..tile {
+                let on_sheet = sheet.get(c, y, 5 * (tile + gap) + x);
+                worst = worst.max((on_sheet - diffuse.get(c, from + y, from + x)).abs());
+            }
+        }
+    }
+    // The sheet has 8 bits, the map's PNG 16: equal to half a step of 8 bits.
+    assert!(worst <= 0.5 / 255.0 + 1e-6, "detail tile off by {worst}");
 
     let mut folders: Vec<_> = std::fs::read_dir(out.path())
         .unwrap()

@@ -18,7 +18,9 @@
 //!
 //! Plus, for the run, `OUT/contact_sheet.png` (a row per material, the first
 //! [`SHEET_MAX_ROWS`], of map previews, the 5 analytic renders and the 5 neural renders, tiles
-//! at most [`SHEET_MAX_TILE`] pixels) and `OUT/summary.json` ([`SampleSummary`]).
+//! at most [`SHEET_MAX_TILE`] pixels; for a material larger than that, a tile of its first
+//! map's centre at one texel per pixel after the previews) and `OUT/summary.json`
+//! ([`SampleSummary`]).
 //!
 //! Seeds are S, S+1, …, S+N−1; a seed names the same material on every run (z and the noise
 //! images are drawn from the seed, `GanModel::features_for_seeds`): same seed, same files.
@@ -57,7 +59,7 @@ use photomat_core::folder_lock::clear_previous_outputs;
 use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
 use photomat_core::map_files::{SaveOptions, folder_bytes, save_maps};
 use photomat_core::previews::map_previews;
-use photomat_core::sheet::{grid, resize_square};
+use photomat_core::sheet::{centre_crop, grid, resize_square};
 use photomat_core::simplify::{SimplifyRecord, simplify};
 use photomat_core::{Brdf, FlashGeometry, FolderLock, LightSet, MaterialMaps, render_with};
 use photomat_generator::GanModel;
@@ -572,10 +574,18 @@ impl Job<'_> {
 
         let sheet_row = if want_row {
             let sheet_tile = tile.min(SHEET_MAX_TILE);
-            let mut row: Vec<PlanarImage> = map_previews(brdf.as_ref(), &maps)?
-                .into_iter()
-                .map(|(_, p)| resize_square(&p, sheet_tile))
+            let previews_full = map_previews(brdf.as_ref(), &maps)?;
+            let mut row: Vec<PlanarImage> = previews_full
+                .iter()
+                .map(|(_, p)| resize_square(p, sheet_tile))
                 .collect();
+            // A material larger than its tile: its first map's centre at one texel per pixel,
+            // where the thumbnails average a fine lattice or grain away.
+            if let Some((_, first)) = previews_full.first()
+                && first.width > sheet_tile
+            {
+                row.push(centre_crop(first, sheet_tile));
+            }
             let previews = row.len();
             row.extend(analytic_tiles.iter().map(|t| resize_square(t, sheet_tile)));
             row.extend(neural_tiles.iter().map(|t| resize_square(t, sheet_tile)));
