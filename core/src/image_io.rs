@@ -183,6 +183,28 @@ impl PlanarImage {
         )?)
     }
 
+    /// The `height`×`width` window whose top-left texel is (`top`, `left`), every channel;
+    /// error if it does not fit.
+    ///
+    /// # Shapes
+    /// (C, H, W) → (C, height, width).
+    pub fn window(&self, top: usize, left: usize, height: usize, width: usize) -> Result<Self> {
+        if top + height > self.height || left + width > self.width {
+            return Err(Error::Invalid(format!(
+                "a {height}×{width} window at ({top}, {left}) does not fit a {}×{} image",
+                self.height, self.width
+            )));
+        }
+        let mut data = Vec::with_capacity(self.channels * height * width);
+        for c in 0..self.channels {
+            for row in top..top + height {
+                let start = (c * self.height + row) * self.width + left;
+                data.extend_from_slice(&self.data[start..start + width]);
+            }
+        }
+        Self::new(self.channels, height, width, data)
+    }
+
     /// Sample of channel `c` at (`row`, `col`).
     pub fn get(&self, c: usize, row: usize, col: usize) -> f32 {
         self.data[(c * self.height + row) * self.width + col]

@@ -200,21 +200,8 @@ impl CropWindow {
     /// The crop of `photo` (C, P, P) with P ≥ top + H and P ≥ left + H: (C, H, H).
     pub fn crop(&self, photo: &PlanarImage) -> Result<PlanarImage> {
         let h = self.size;
-        if self.top + h > photo.height || self.left + h > photo.width {
-            return Err(Error::Invalid(format!(
-                "a {h}×{h} crop at ({}, {}) does not fit a {}×{} photo",
-                self.top, self.left, photo.height, photo.width
-            )));
-        }
-        let mut data = Vec::with_capacity(photo.channels * h * h);
-        for c in 0..photo.channels {
-            for row in self.top..self.top + h {
-                let start = (c * photo.height + row) * photo.width + self.left;
-                data.extend_from_slice(&photo.data[start..start + h]);
-            }
-        }
-        self.symmetry
-            .image(&PlanarImage::new(photo.channels, h, h, data)?)
+        let window = photo.window(self.top, self.left, h, h)?;
+        self.symmetry.image(&window)
     }
 }
 

@@ -1,19 +1,22 @@
 //! Picking a GAN run's model among its snapshots, by measuring them.
 //!
-//! A GAN trained on these CPUs does not improve steadily: the bundled recipe's SWD swings by
-//! ±25 % between snapshots a thousand steps apart, and one `eval-gan` seed is noisy as well
-//! (the two seeds of one model differ by up to 40 %; docs/benchmarks.md, "Picking a snapshot").
-//! So a run keeps snapshots of G_ema + M (`train-gan --snapshot-every`,
+//! A GAN trained on these CPUs does not improve steadily: the bundled recipe's SWD moves by
+//! a quarter to a half between snapshots a thousand steps apart, and one `eval-gan` seed is
+//! noisy as well (two seeds of one model differ by up to half at 64 images; docs/benchmarks.md,
+//! "Picking a snapshot"). So a run keeps snapshots of G_ema + M (`train-gan --snapshot-every`,
 //! [`Cadence::snapshot_every`](photomat_generator::train::Cadence)) and this module scores
 //! each on several seeds of the SWD against the run's data set ([`model_swd`], the figure
 //! `eval-gan` reports for a seed: relit native-scale windows against real patches, ProGAN's
 //! sliced Wasserstein distance), then ranks them by the mean over the seeds.
 //!
-//! Each measurement is kept in the model folder ([`SCORES_FILE`], keyed by data set, count and
-//! seed, and valid while the folder's weights file is unchanged), so ranking again as a run
-//! adds snapshots, with more seeds, or after an interruption measures only what is new.
+//! Each measurement is kept in the model folder ([`SCORES_FILE`]) under a key naming the
+//! data set (its path and a hash of its index), the count, the seed and the metric's
+//! settings, for the weights file whose content hash it records: ranking again as a run adds
+//! snapshots, with more seeds, or after an interruption measures only what is new, and a
+//! rewritten snapshot or a re-prepared data set is measured afresh.
 
 use std::collections::BTreeMap;
+use std::hash::{Hash, Hasher};
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, Result, bail};
@@ -25,50 +28,11 @@ use photomat_generator::swd::{FakeWindows, SwdConfig, model_swd};
 use photomat_generator::train::SNAPSHOTS_DIR;
 use serde::{Deserialize, Serialize};
 
+use crate::dataset::INDEX_FILE;
 use crate::source::DatasetSource;
 
 /// The file in a model folder that keeps the SWDs measured of it.
 pub const SCORES_FILE: &str = "swd_scores.json";
-
-/// The measurements kept in a model folder: SWD ×10³ by [`score_key`], for the weights file
-/// whose [`weights_fingerprint`] is `weights`.
-#[derive(Debug, Default, Serialize, Deserialize)]
-struct KeptScores {
-    weights: String,
-    swd: BTreeMap<String, f64>,
-}
-
-/// The key of one measurement: the data set (as an absolute path), the count and the seed.
-fn score_key(data: &Path, count: usize, seed: u64) -> String {
-    format!("{}|count={count}|seed={seed}", absolute(data).display())
-}
-
-/// Length and modification time of the folder's weights file: a rewritten snapshot (a run
-/// resumed from an earlier checkpoint with other settings) invalidates what was kept.
-fn weights_fingerprint(folder: &Path) -> Result<String> {
-    let path = folder.join(GAN_WEIGHTS_FILE);
-    let meta = std::fs::metadata(&path)
-        .map_err(|e| candle_core::Error::msg(format!("{}: {e}", path.display())))?;
-    let modified = meta
-        .modified()
-        .ok()
-        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
-        .map_or(0, |d| d.as_nanos());
-    Ok(format!("{} bytes, modified {modified} ns", meta.len()))
-}
-
-/// What `folder` keeps for its current weights (nothing if the file is missing, unreadable or
-/// for other weights).
-fn kept_scores(folder: &Path, weights: &str) -> KeptScores {
-    std::fs::read(folder.join(SCORES_FILE))
-        .ok()
-        .and_then(|bytes| serde_json::from_slice::<KeptScores>(&bytes).ok())
-        .filter(|kept| kept.weights == weights)
-        .unwrap_or_else(|| KeptScores {
-            weights: weights.to_string(),
-            swd: BTreeMap::new(),
-        })
-}
 
 /// One model folder's SWD on every seed.
 #[derive(Debug, Clone, Serialize)]
@@ -85,6 +49,15 @@ pub struct SnapshotScore {
     pub mean: f64,
 }
 
+/// A model folder that could not be scored, and why.
+#[derive(Debug, Clone, Serialize)]
+pub struct UnscoredFolder {
+    /// The model folder.
+    pub folder: PathBuf,
+    /// The error, with its causes.
+    pub error: String,
+}
+
 /// What to measure each snapshot with.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScoreSettings {
@@ -94,6 +67,44 @@ pub struct ScoreSettings {
     pub count: usize,
     /// The seeds of the samples, lights and patches (one SWD each).
     pub seeds: Vec<u64>,
+}
+
+/// The scores of the folders that could be measured, and the folders that could not.
+#[derive(Debug, Clone, Serialize)]
+pub struct Scores {
+    /// One per measured folder, in the order given.
+    pub scored: Vec<SnapshotScore>,
+    /// One per folder whose model or data could not be read or measured.
+    pub unscored: Vec<UnscoredFolder>,
+}
+
+/// The measurements kept in a model folder: SWD ×10³ by key ([`Scorer::key`]), for the
+/// weights whose [`content_hash`] is `weights`.
+#[derive(Debug, Default, Serialize, Deserialize)]
+struct KeptScores {
+    weights: String,
+    swd: BTreeMap<String, f64>,
+}
+
+/// A hash of `bytes` as hexadecimal text: identifies a weights file's or an index's content
+/// (std's SipHash; a toolchain that changes it only makes kept scores be measured again).
+fn content_hash(bytes: &[u8]) -> String {
+    let mut hasher = std::collections::hash_map::DefaultHasher::new();
+    bytes.hash(&mut hasher);
+    format!("{:016x}", hasher.finish())
+}
+
+/// What `folder` keeps for the weights hashed `weights` (nothing if the file is missing,
+/// unreadable or for other weights).
+fn kept_scores(folder: &Path, weights: &str) -> KeptScores {
+    std::fs::read(folder.join(SCORES_FILE))
+        .ok()
+        .and_then(|bytes| serde_json::from_slice::<KeptScores>(&bytes).ok())
+        .filter(|kept| kept.weights == weights)
+        .unwrap_or_else(|| KeptScores {
+            weights: weights.to_string(),
+            swd: BTreeMap::new(),
+        })
 }
 
 /// The snapshot folders of the run folder `run` (`snapshots/step-NNNNNN/` holding a
@@ -131,71 +142,197 @@ pub fn run_snapshots(run: &Path) -> Result<Vec<PathBuf>> {
     Ok(found.into_iter().map(|(_, path)| path).collect())
 }
 
-/// Scores every model folder of `folders` on every seed of `settings`; `progress` hears
-/// (model index, seeds done of that model) after each measurement.
+/// The measurement of one folder on the settings' seeds.
+struct Scorer<'a> {
+    settings: &'a ScoreSettings,
+    /// The part of every key that does not depend on the seed.
+    key_prefix: String,
+}
+
+impl<'a> Scorer<'a> {
+    fn new(settings: &'a ScoreSettings) -> Result<Self> {
+        let index = settings.data.join(INDEX_FILE);
+        let bytes = std::fs::read(&index).map_err(|e| {
+            candle_core::Error::msg(format!(
+                "{}: cannot read the data set's index ({e}); is {} a prepared data set?",
+                index.display(),
+                settings.data.display()
+            ))
+        })?;
+        Ok(Self {
+            settings,
+            key_prefix: format!(
+                "{} (index {})|count={}|{:?}|native windows",
+                absolute(&settings.data).display(),
+                content_hash(&bytes),
+                settings.count,
+                SwdConfig::default()
+            ),
+        })
+    }
+
+    /// The key of the measurement on `seed`.
+    fn key(&self, seed: u64) -> String {
+        format!("{}|seed={seed}", self.key_prefix)
+    }
+
+    /// `folder`'s SWD per seed, from what it keeps where it can; `progress` hears the seeds
+    /// done. Measured values are kept as soon as they are known (non-finite ones are not).
+    fn score(&self, folder: &Path, progress: &mut dyn FnMut(usize)) -> Result<SnapshotScore> {
+        let weights_path = folder.join(GAN_WEIGHTS_FILE);
+        let weights = std::fs::read(&weights_path)
+            .map_err(|e| candle_core::Error::msg(format!("{}: {e}", weights_path.display())))?;
+        let mut kept = kept_scores(folder, &content_hash(&weights));
+        let provenance = read_gan_manifest(folder)?.provenance;
+        // Loaded only when a seed is not kept.
+        let mut measured: Option<(GanModel, DatasetSource)> = None;
+        let mut swd_per_seed = Vec::with_capacity(self.settings.seeds.len());
+        for (done, &seed) in self.settings.seeds.iter().enumerate() {
+            let key = self.key(seed);
+            let swd = match kept.swd.get(&key) {
+                Some(&swd) => swd,
+                None => {
+                    if measured.is_none() {
+                        let model = GanModel::load(folder, &Device::Cpu)?;
+                        let data = DatasetSource::for_model(&self.settings.data, model.config())?;
+                        measured = Some((model, data));
+                    }
+                    let (model, data) = measured.as_ref().expect("loaded just above");
+                    let swd = model_swd(
+                        model,
+                        data,
+                        self.settings.count,
+                        seed,
+                        FakeWindows::Native,
+                        &SwdConfig::default(),
+                        &mut |_, _| {},
+                    )?
+                    .mean;
+                    if swd.is_finite() {
+                        kept.swd.insert(key, swd);
+                        let path = folder.join(SCORES_FILE);
+                        let text = serde_json::to_string_pretty(&kept)
+                            .map_err(candle_core::Error::wrap)?;
+                        write_atomic(&path, text.as_bytes()).map_err(|e| {
+                            candle_core::Error::msg(format!("cannot write {}: {e}", path.display()))
+                        })?;
+                    }
+                    swd
+                }
+            };
+            swd_per_seed.push(swd);
+            progress(done + 1);
+        }
+        let mean = swd_per_seed.iter().sum::<f64>() / swd_per_seed.len() as f64;
+        Ok(SnapshotScore {
+            folder: folder.to_path_buf(),
+            step: provenance["step"].as_u64(),
+            kimg: provenance["kimg"].as_f64(),
+            swd_per_seed,
+            mean,
+        })
+    }
+}
+
+/// Scores every model folder of `folders` on every seed of `settings`; a folder that cannot
+/// be read or measured is reported in [`Scores::unscored`] and the others are still scored.
+/// `progress` hears (folder index, seeds done of that folder) after each seed.
 pub fn score_models(
     folders: &[PathBuf],
     settings: &ScoreSettings,
     progress: &mut dyn FnMut(usize, usize),
-) -> Result<Vec<SnapshotScore>> {
+) -> Result<Scores> {
     if settings.seeds.is_empty() || settings.count == 0 {
         bail!("scoring snapshots needs at least one seed and one image per seed");
     }
-    let device = Device::Cpu;
-    folders
-        .iter()
-        .enumerate()
-        .map(|(index, folder)| {
-            let in_folder = |e: candle_core::Error| e.context(format!("{}", folder.display()));
-            let model = GanModel::load(folder, &device).map_err(in_folder)?;
-            let provenance = read_gan_manifest(folder).map_err(in_folder)?.provenance;
-            let data = DatasetSource::for_model(&settings.data, model.config())?;
-            let weights = weights_fingerprint(folder)?;
-            let mut kept = kept_scores(folder, &weights);
-            let mut swd_per_seed = Vec::with_capacity(settings.seeds.len());
-            for (done, &seed) in settings.seeds.iter().enumerate() {
-                let key = score_key(&settings.data, settings.count, seed);
-                let swd = match kept.swd.get(&key) {
-                    Some(&swd) => swd,
-                    None => {
-                        let swd = model_swd(
-                            &model,
-                            &data,
-                            settings.count,
-                            seed,
-                            FakeWindows::Native,
-                            &SwdConfig::default(),
-                            &mut |_, _| {},
-                        )
-                        .map_err(in_folder)?
-                        .mean;
-                        kept.swd.insert(key, swd);
-                        let text = serde_json::to_string_pretty(&kept)
-                            .map_err(candle_core::Error::wrap)?;
-                        let path = folder.join(SCORES_FILE);
-                        write_atomic(&path, text.as_bytes()).map_err(|e| {
-                            candle_core::Error::msg(format!("cannot write {}: {e}", path.display()))
-                        })?;
-                        swd
-                    }
-                };
-                swd_per_seed.push(swd);
-                progress(index, done + 1);
-            }
-            let mean = swd_per_seed.iter().sum::<f64>() / swd_per_seed.len() as f64;
-            Ok(SnapshotScore {
+    let scorer = Scorer::new(settings)?;
+    let mut scores = Scores {
+        scored: Vec::new(),
+        unscored: Vec::new(),
+    };
+    for (index, folder) in folders.iter().enumerate() {
+        match scorer.score(folder, &mut |done| progress(index, done)) {
+            Ok(score) => scores.scored.push(score),
+            Err(e) => scores.unscored.push(UnscoredFolder {
                 folder: folder.clone(),
-                step: provenance["step"].as_u64(),
-                kimg: provenance["kimg"].as_f64(),
-                swd_per_seed,
-                mean,
-            })
-        })
-        .collect()
+                error: format!("{e:#}"),
+            }),
+        }
+    }
+    Ok(scores)
 }
 
-/// The scores from the lowest mean SWD (the closest to the photos) to the highest.
+/// The scores from the lowest mean SWD (the closest to the photos) to the highest, those
+/// whose mean is not finite (a diverged snapshot) last.
 pub fn ranked(mut scores: Vec<SnapshotScore>) -> Vec<SnapshotScore> {
-    scores.sort_by(|a, b| a.mean.total_cmp(&b.mean));
+    scores.sort_by(|a, b| {
+        (!a.mean.is_finite())
+            .cmp(&!b.mean.is_finite())
+            .then(a.mean.total_cmp(&b.mean))
+    });
     scores
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn score(step: u64, mean: f64) -> SnapshotScore {
+        SnapshotScore {
+            folder: PathBuf::from(format!("step-{step}")),
+            step: Some(step),
+            kimg: None,
+            swd_per_seed: vec![mean],
+            mean,
+        }
+    }
+
+    #[test]
+    fn ranked_orders_by_mean_with_non_finite_means_last() {
+        let order: Vec<u64> = ranked(vec![
+            score(1, f64::NAN),
+            score(2, 90.0),
+            score(3, -f64::NAN),
+            score(4, 80.0),
+            score(5, f64::INFINITY),
+        ])
+        .iter()
+        .map(|s| s.step.unwrap())
+        .collect();
+        assert_eq!(&order[..2], [4, 2]);
+        let mut tail = order[2..].to_vec();
+        tail.sort();
+        assert_eq!(tail, [1, 3, 5]);
+    }
+
+    #[test]
+    fn kept_scores_are_read_back_only_for_the_same_weights() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut kept = KeptScores {
+            weights: content_hash(b"weights A"),
+            swd: BTreeMap::new(),
+        };
+        kept.swd.insert("k".into(), 81.5);
+        std::fs::write(
+            dir.path().join(SCORES_FILE),
+            serde_json::to_vec(&kept).unwrap(),
+        )
+        .unwrap();
+        assert_eq!(
+            kept_scores(dir.path(), &content_hash(b"weights A")).swd["k"],
+            81.5
+        );
+        assert!(
+            kept_scores(dir.path(), &content_hash(b"weights B"))
+                .swd
+                .is_empty()
+        );
+        // An unreadable file keeps nothing.
+        std::fs::write(dir.path().join(SCORES_FILE), b"{not json").unwrap();
+        assert!(
+            kept_scores(dir.path(), &content_hash(b"weights A"))
+                .swd
+                .is_empty()
+        );
+    }
 }

@@ -265,6 +265,32 @@ const NOISE_STREAM_KEY: u64 = 0x6E6F_6973_655F_696D; // "noise_im"
 /// Key mixed into a seed for its local latent field (spatial G).
 const FIELD_STREAM_KEY: u64 = 0x6C6F_6361_6C5F_6669; // "local_fi"
 
+/// Copies the GAN model folder `from` (`gan.json` + `gan.safetensors`) into `to` (created if
+/// missing; atomically each, weights first, so that a folder whose manifest exists is
+/// complete), unless both name the same folder.
+pub fn copy_gan_model(from: &Path, to: &Path) -> Result<()> {
+    std::fs::create_dir_all(to)
+        .map_err(|e| candle_core::Error::msg(format!("cannot create {}: {e}", to.display())))?;
+    let same = match (from.canonicalize(), to.canonicalize()) {
+        (Ok(a), Ok(b)) => a == b,
+        _ => false,
+    };
+    if same {
+        return Ok(());
+    }
+    for name in [GAN_WEIGHTS_FILE, GAN_MANIFEST_FILE] {
+        let source = from.join(name);
+        let bytes = std::fs::read(&source).map_err(|e| {
+            candle_core::Error::msg(format!(
+                "{}: cannot read the GAN model: {e}",
+                source.display()
+            ))
+        })?;
+        write_atomic(&to.join(name), &bytes).map_err(candle_core::Error::wrap)?;
+    }
+    Ok(())
+}
+
 /// Reads and checks `dir/gan.json`; errors name the file and the problem.
 pub fn read_gan_manifest(dir: &Path) -> Result<GanManifest> {
     let path: PathBuf = dir.join(GAN_MANIFEST_FILE);

@@ -87,8 +87,8 @@ fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
         "analytic vs neural L1 within a photo's reach {l1}"
     );
 
-    // The contact sheet: per row 5 map previews, the diffuse map's centre at one texel per
-    // pixel (a 512² material is larger than a 128² tile), 5 analytic and 5 neural renders.
+    // The contact sheet: per row the diffuse map's centre at one texel per pixel (a 512²
+    // material is larger than a 128² tile), 5 map previews, 5 analytic and 5 neural renders.
     let (sheet, _) = read_png(&out.path().join("contact_sheet.png")).unwrap();
     let (tile, gap) = (SHEET_MAX_TILE, CONTACT_SHEET_GAP);
     assert_eq!(
@@ -101,7 +101,7 @@ fn sampling_the_bundled_model_writes_periodic_maps_that_match_m() {
     for c in 0..3 {
         for y in 0..tile {
             for x in 0..tile {
-                let on_sheet = sheet.get(c, y, 5 * (tile + gap) + x);
+                let on_sheet = sheet.get(c, y, x);
                 worst = worst.max((on_sheet - diffuse.get(c, from + y, from + x)).abs());
             }
         }

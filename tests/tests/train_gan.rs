@@ -436,8 +436,8 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
     );
 
     // Every measurement is kept in its snapshot: ranking again with a third seed measures only
-    // that one (a kept value, altered here, is reported as kept), and a rewritten weights
-    // file discards what was kept for the old weights.
+    // that one (a kept value, altered here, is reported as kept), and other weights in the
+    // folder discard what was kept for the old ones.
     let first = snapshot(1);
     let kept_path = first.join("swd_scores.json");
     let mut kept: serde_json::Value =
@@ -451,7 +451,7 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
         .clone();
     scores.insert(seed0, serde_json::json!(1.5));
     std::fs::write(&kept_path, serde_json::to_vec(&kept).unwrap()).unwrap();
-    let rank = |seeds: &str| -> Vec<f64> {
+    let rank = |seeds: &str| -> serde_json::Value {
         let printed = photomat(&[
             "rank-snapshots",
             path_str(&run),
@@ -462,15 +462,15 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
             "--json",
         ])
         .unwrap();
-        let report: serde_json::Value = serde_json::from_str(&printed).unwrap();
-        let entry = report["ranking"]
+        serde_json::from_str(&printed).unwrap()
+    };
+    let per_seed = |report: &serde_json::Value, step: u64| -> Vec<f64> {
+        report["ranking"]
             .as_array()
             .unwrap()
             .iter()
-            .find(|r| r["step"] == 1)
-            .unwrap()
-            .clone();
-        entry["swd_per_seed"]
+            .find(|r| r["step"] == step)
+            .unwrap()["swd_per_seed"]
             .as_array()
             .unwrap()
             .iter()
@@ -478,13 +478,37 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
             .collect()
     };
     let three = rank("3");
-    assert_eq!(three.len(), 3);
-    assert_eq!(three[0], 1.5);
-    let weights = std::fs::read(first.join("gan.safetensors")).unwrap();
-    std::thread::sleep(std::time::Duration::from_millis(50));
-    std::fs::write(first.join("gan.safetensors"), &weights).unwrap();
+    assert_eq!(per_seed(&three, 1).len(), 3);
+    assert_eq!(per_seed(&three, 1)[0], 1.5);
+    std::fs::copy(
+        snapshot(2).join("gan.safetensors"),
+        first.join("gan.safetensors"),
+    )
+    .unwrap();
     let measured = rank("1");
-    assert!(measured[0] != 1.5 && measured[0] > 0.0, "{measured:?}");
+    assert_eq!(per_seed(&measured, 1), per_seed(&measured, 2));
+
+    // A snapshot that cannot be read is reported and left out; the others are still ranked.
+    std::fs::write(snapshot(2).join("gan.safetensors"), b"not weights").unwrap();
+    let partial = rank("1");
+    assert_eq!(partial["ranking"].as_array().unwrap().len(), 2, "{partial}");
+    let unscored = partial["unscored"].as_array().unwrap();
+    assert_eq!(unscored.len(), 1, "{partial}");
+    assert!(
+        unscored[0]["folder"]
+            .as_str()
+            .unwrap()
+            .ends_with("step-000002"),
+        "{partial}"
+    );
+
+    // A resume removes the snapshots after its checkpoint (here one planted at step 9, as a
+    // run killed past its last checkpoint leaves them) and keeps taking them.
+    std::fs::create_dir_all(snapshot(9)).unwrap();
+    std::fs::copy(snapshot(3).join("gan.json"), snapshot(9).join("gan.json")).unwrap();
+    train(None, &run, &["--resume", "--steps", "4"]).unwrap();
+    assert!(!snapshot(9).exists());
+    assert!(snapshot(4).join("gan.safetensors").is_file());
 
     // A run without snapshots says how to keep them.
     let plain = dir.path().join("plain");

@@ -5,7 +5,9 @@
 //! `RUN/snapshots/ranking.json`; `--best-to DIR` copies the best snapshot there as a model
 //! folder (what `train-estimator --gan` and `sample --model` take). Each measurement is kept in
 //! its snapshot (`swd_scores.json`), so ranking again while the run adds snapshots, with more
-//! seeds, or after Ctrl-C measures only what is new.
+//! seeds, or after Ctrl-C measures only what is new. It runs beside a training run that is
+//! writing RUN (it takes no lock: it writes only those two kinds of files, atomically), and a
+//! snapshot that cannot be read is reported and left out.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -13,7 +15,7 @@ use std::path::PathBuf;
 use anyhow::Context;
 use photomat_core::image_io::write_atomic;
 use photomat_data::snapshots::{ScoreSettings, SnapshotScore, ranked, run_snapshots, score_models};
-use photomat_generator::model_files::{GAN_MANIFEST_FILE, GAN_WEIGHTS_FILE};
+use photomat_generator::model_files::copy_gan_model;
 use photomat_generator::train::SNAPSHOTS_DIR;
 use photomat_generator::train::state::read_config;
 
@@ -34,15 +36,16 @@ pub struct Args {
     pub data: Option<PathBuf>,
 
     /// Seeds per snapshot (0 … N−1), one SWD each. One seed can misrank: two seeds of one
-    /// model differ by up to 40 % at 64 images (docs/benchmarks.md, "Picking a snapshot").
+    /// model differ by up to half at 64 images (docs/benchmarks.md, "Picking a snapshot").
+    /// At most 64: beyond that the seeds' mean moves less than the snapshots differ.
     #[arg(long, value_name = "N", default_value_t = 4,
           value_parser = clap::value_parser!(u64).range(1..=64))]
     pub seeds: u64,
 
-    /// Relit samples and real patches per seed (as `eval-gan --count`). About 40 s per seed
-    /// and snapshot for the bundled recipe on one core at 64.
+    /// Relit samples and real patches per seed (as `eval-gan --count`; both sets are held in
+    /// memory). About 4 s per seed and snapshot for the bundled recipe on two threads at 64.
     #[arg(long, value_name = "N", default_value_t = 64,
-          value_parser = clap::value_parser!(u64).range(1..=16_384))]
+          value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     pub count: u64,
 
     /// Copy the best snapshot's gan.json + gan.safetensors into this folder (created if
@@ -79,19 +82,36 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         bar.set_position(model as u64 * per_model + seeds_done as u64)
     });
     bar.finish_and_clear();
-    let scores = ranked(scores.with_context(|| {
+    let scores = scores.with_context(|| {
         format!(
             "cannot score the snapshots of '{}' against '{}'",
             args.run.display(),
             settings.data.display()
         )
-    })?);
+    })?;
+    for unscored in &scores.unscored {
+        eprintln!(
+            "warning: {} not ranked: {}",
+            unscored.folder.display(),
+            unscored.error
+        );
+    }
+    if scores.scored.is_empty() {
+        anyhow::bail!(
+            "none of the {} snapshots of '{}' could be scored (above)",
+            folders.len(),
+            args.run.display()
+        );
+    }
+    let unscored = scores.unscored;
+    let scores = ranked(scores.scored);
 
     let report = serde_json::json!({
         "data": settings.data,
         "count": settings.count,
         "seeds": settings.seeds,
         "ranking": scores,
+        "unscored": unscored,
     });
     let text = serde_json::to_string_pretty(&report)?;
     let ranking_path = args.run.join(SNAPSHOTS_DIR).join(RANKING_FILE);
@@ -100,13 +120,13 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
 
     let best = &scores[0];
     if let Some(dir) = &args.best_to {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
-        for file in [GAN_MANIFEST_FILE, GAN_WEIGHTS_FILE] {
-            let bytes = std::fs::read(best.folder.join(file))
-                .with_context(|| format!("cannot read {}", best.folder.join(file).display()))?;
-            write_atomic(&dir.join(file), &bytes)
-                .with_context(|| format!("cannot write {}", dir.join(file).display()))?;
-        }
+        copy_gan_model(&best.folder, dir).with_context(|| {
+            format!(
+                "cannot copy the best snapshot {} to {}",
+                best.folder.display(),
+                dir.display()
+            )
+        })?;
     }
     if args.json {
         writeln!(out, "{text}")?;

@@ -18,9 +18,8 @@
 //!
 //! Plus, for the run, `OUT/contact_sheet.png` (a row per material, the first
 //! [`SHEET_MAX_ROWS`], of map previews, the 5 analytic renders and the 5 neural renders, tiles
-//! at most [`SHEET_MAX_TILE`] pixels; for a material larger than that, a tile of its first
-//! map's centre at one texel per pixel after the previews) and `OUT/summary.json`
-//! ([`SampleSummary`]).
+//! at most [`SHEET_MAX_TILE`] pixels; for a material larger than that, the row starts with
+//! its first map's centre at one texel per pixel) and `OUT/summary.json` ([`SampleSummary`]).
 //!
 //! Seeds are S, S+1, …, S+N−1; a seed names the same material on every run (z and the noise
 //! images are drawn from the seed, `GanModel::features_for_seeds`): same seed, same files.
@@ -575,17 +574,20 @@ impl Job<'_> {
         let sheet_row = if want_row {
             let sheet_tile = tile.min(SHEET_MAX_TILE);
             let previews_full = map_previews(brdf.as_ref(), &maps)?;
+            // A material larger than its tile starts its row with its first map's centre at
+            // one texel per pixel, where the thumbnails average a fine lattice or grain away
+            // (first, so that rows of models with fewer maps keep it in the same column).
             let mut row: Vec<PlanarImage> = previews_full
-                .iter()
-                .map(|(_, p)| resize_square(p, sheet_tile))
+                .first()
+                .filter(|(_, first)| first.width > sheet_tile)
+                .map(|(_, first)| centre_crop(first, sheet_tile))
+                .into_iter()
                 .collect();
-            // A material larger than its tile: its first map's centre at one texel per pixel,
-            // where the thumbnails average a fine lattice or grain away.
-            if let Some((_, first)) = previews_full.first()
-                && first.width > sheet_tile
-            {
-                row.push(centre_crop(first, sheet_tile));
-            }
+            row.extend(
+                previews_full
+                    .iter()
+                    .map(|(_, p)| resize_square(p, sheet_tile)),
+            );
             let previews = row.len();
             row.extend(analytic_tiles.iter().map(|t| resize_square(t, sheet_tile)));
             row.extend(neural_tiles.iter().map(|t| resize_square(t, sheet_tile)));
@@ -707,10 +709,11 @@ pub(crate) fn analytic_renders(
     Ok(Tensor::cat(&analytic, 0)?)
 }
 
-/// One material's contact-sheet row: its map previews, then its renders.
+/// One material's contact-sheet row: its map previews (after the detail tile of a large
+/// material), then its renders.
 struct SheetRow {
     tiles: Vec<PlanarImage>,
-    /// How many of `tiles` are map previews.
+    /// How many of `tiles` come before the renders (the detail tile and the map previews).
     previews: usize,
 }
 

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 
 use photomat_core::image_io::write_atomic;
 use photomat_core::{Error, Result};
-use photomat_generator::model_files::{GAN_MANIFEST_FILE, GAN_WEIGHTS_FILE};
+pub use photomat_generator::model_files::copy_gan_model;
 use serde::{Deserialize, Serialize};
 
 use super::config::TrainConfig;
@@ -64,25 +64,4 @@ impl TrainManifest {
         serde_json::from_str(&text)
             .map_err(|e| Error::file(&path, format!("not a training manifest: {e}")))
     }
-}
-
-/// Copies `gan.json` and `gan.safetensors` from the GAN model folder `gan_dir` into `out_dir`
-/// (atomically each, weights first), unless both name the same folder.
-pub fn copy_gan_model(gan_dir: &Path, out_dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(out_dir)
-        .map_err(|e| Error::file(out_dir, format!("cannot create: {e}")))?;
-    let same = match (gan_dir.canonicalize(), out_dir.canonicalize()) {
-        (Ok(a), Ok(b)) => a == b,
-        _ => false,
-    };
-    if same {
-        return Ok(());
-    }
-    for name in [GAN_WEIGHTS_FILE, GAN_MANIFEST_FILE] {
-        let from = gan_dir.join(name);
-        let bytes = std::fs::read(&from)
-            .map_err(|e| Error::file(&from, format!("cannot read the GAN model: {e}")))?;
-        write_atomic(&out_dir.join(name), &bytes)?;
-    }
-    Ok(())
 }

@@ -411,7 +411,9 @@ impl GanTraining {
     /// Opens the run of `plan` in `run` (created and locked until the training is dropped: a
     /// second process on the folder fails naming this one) to train up to `total` steps: a
     /// fresh run writes its first checkpoint at once, a resumed one loads its state and keeps
-    /// the log rows up to it. Temporary files of a killed checkpoint are removed.
+    /// the log rows up to it and removes the snapshots after it (left by a run that went on
+    /// past its last checkpoint; the resumed run makes them again). Temporary files of a
+    /// killed checkpoint are removed.
     pub fn open(run: &Path, plan: RunPlan, total: u64, device: &Device) -> anyhow::Result<Self> {
         // Before any backward pass of this thread (the R1 penalty is a double backward).
         enable_second_order_gradients();
@@ -420,6 +422,7 @@ impl GanTraining {
         let log_path = run.join(LOG_FILE);
         let (log, restored) = if plan.resume {
             let restored = trainer.load_state(run)?;
+            remove_snapshots_after(run, trainer.steps_done())?;
             (
                 TrainLog::resume(&log_path, trainer.steps_done())?,
                 Some(restored),
@@ -786,6 +789,28 @@ fn provenance(trainer: &Trainer) -> serde_json::Value {
 /// model folder (gan.json + gan.safetensors) of G_ema + M after that step.
 pub fn snapshot_folder(run: &Path, step: u64) -> PathBuf {
     run.join(SNAPSHOTS_DIR).join(format!("step-{step:06}"))
+}
+
+/// Removes the snapshot folders of `run` whose step is after `step`.
+fn remove_snapshots_after(run: &Path, step: u64) -> anyhow::Result<()> {
+    let dir = run.join(SNAPSHOTS_DIR);
+    let Ok(entries) = std::fs::read_dir(&dir) else {
+        return Ok(()); // no snapshots
+    };
+    for entry in entries {
+        let path = entry?.path();
+        let later = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .and_then(|n| n.strip_prefix("step-"))
+            .and_then(|n| n.parse::<u64>().ok())
+            .is_some_and(|s| s > step);
+        if later {
+            std::fs::remove_dir_all(&path)
+                .with_context(|| format!("cannot remove the later snapshot {}", path.display()))?;
+        }
+    }
+    Ok(())
 }
 
 /// The folder of a run's snapshots ([`Cadence::snapshot_every`]).
