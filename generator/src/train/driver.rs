@@ -751,14 +751,14 @@ fn resumed_config(run: &Path, settings: &GanSettings) -> anyhow::Result<RunPlan>
     }
     let cadence = settings.cadence_over(saved.cadence);
     if cadence != saved.cadence {
+        let snapshots = match cadence.snapshot_every {
+            0 => "no snapshots".to_string(),
+            every => format!("a snapshot every {every} steps"),
+        };
         notes.push(format!(
             "note: checkpoints every {}, samples every {}, SWD every {} steps on {} images, \
-             snapshots every {} steps (0: none) from here on",
-            cadence.checkpoint_every,
-            cadence.sample_every,
-            cadence.swd_every,
-            cadence.swd_count,
-            cadence.snapshot_every
+             {snapshots} from here on",
+            cadence.checkpoint_every, cadence.sample_every, cadence.swd_every, cadence.swd_count,
         ));
         saved.cadence = cadence;
     }
