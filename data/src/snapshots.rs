@@ -25,7 +25,7 @@ use photomat_core::paths::absolute;
 use photomat_generator::GanModel;
 use photomat_generator::model_files::{GAN_MANIFEST_FILE, GAN_WEIGHTS_FILE, read_gan_manifest};
 use photomat_generator::swd::{FakeWindows, SwdConfig, model_swd};
-use photomat_generator::train::SNAPSHOTS_DIR;
+use photomat_generator::train::{SNAPSHOTS_DIR, snapshot_folders};
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::INDEX_FILE;
@@ -111,35 +111,25 @@ fn kept_scores(folder: &Path, weights: &str) -> KeptScores {
 /// gan.json), in the order of their steps.
 pub fn run_snapshots(run: &Path) -> Result<Vec<PathBuf>> {
     let dir = run.join(SNAPSHOTS_DIR);
-    let entries = std::fs::read_dir(&dir).map_err(|e| {
-        candle_core::Error::msg(format!(
-            "{}: cannot list the run's snapshots ({e}); train with --snapshot-every N to keep \
-             them",
-            dir.display()
-        ))
-    })?;
-    let mut found = Vec::new();
-    for entry in entries {
-        let path = entry.map_err(candle_core::Error::wrap)?.path();
-        let step = path
-            .file_name()
-            .and_then(|n| n.to_str())
-            .and_then(|n| n.strip_prefix("step-"))
-            .and_then(|n| n.parse::<u64>().ok());
-        if let Some(step) = step
-            && path.join(GAN_MANIFEST_FILE).is_file()
-        {
-            found.push((step, path));
-        }
-    }
+    let found: Vec<PathBuf> = snapshot_folders(run)
+        .map_err(|e| {
+            candle_core::Error::msg(format!(
+                "{}: cannot list the run's snapshots ({e})",
+                dir.display()
+            ))
+        })?
+        .into_iter()
+        .map(|(_, path)| path)
+        .filter(|path| path.join(GAN_MANIFEST_FILE).is_file())
+        .collect();
     if found.is_empty() {
         bail!(
-            "{}: no snapshot folders (step-NNNNNN/gan.json)",
+            "{}: no snapshot folders (step-NNNNNN/gan.json); train with --snapshot-every N to \
+             keep them",
             dir.display()
         );
     }
-    found.sort();
-    Ok(found.into_iter().map(|(_, path)| path).collect())
+    Ok(found)
 }
 
 /// The measurement of one folder on the settings' seeds.

@@ -791,24 +791,37 @@ pub fn snapshot_folder(run: &Path, step: u64) -> PathBuf {
     run.join(SNAPSHOTS_DIR).join(format!("step-{step:06}"))
 }
 
-/// Removes the snapshot folders of `run` whose step is after `step`.
-fn remove_snapshots_after(run: &Path, step: u64) -> anyhow::Result<()> {
-    let dir = run.join(SNAPSHOTS_DIR);
-    let Ok(entries) = std::fs::read_dir(&dir) else {
-        return Ok(()); // no snapshots
+/// The snapshot folders of the run folder `run` ([`snapshot_folder`] names) with their steps,
+/// in the order of the steps; none when the run has no snapshot folder.
+pub fn snapshot_folders(run: &Path) -> std::io::Result<Vec<(u64, PathBuf)>> {
+    let entries = match std::fs::read_dir(run.join(SNAPSHOTS_DIR)) {
+        Ok(entries) => entries,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(e),
     };
+    let mut found = Vec::new();
     for entry in entries {
         let path = entry?.path();
-        let later = path
+        let step = path
             .file_name()
             .and_then(|n| n.to_str())
             .and_then(|n| n.strip_prefix("step-"))
-            .and_then(|n| n.parse::<u64>().ok())
-            .is_some_and(|s| s > step);
-        if later {
-            std::fs::remove_dir_all(&path)
-                .with_context(|| format!("cannot remove the later snapshot {}", path.display()))?;
+            .and_then(|n| n.parse::<u64>().ok());
+        if let Some(step) = step {
+            found.push((step, path));
         }
+    }
+    found.sort();
+    Ok(found)
+}
+
+/// Removes the snapshot folders of `run` whose step is after `step`.
+fn remove_snapshots_after(run: &Path, step: u64) -> anyhow::Result<()> {
+    let folders = snapshot_folders(run)
+        .with_context(|| format!("cannot list the snapshots of {}", run.display()))?;
+    for (_, path) in folders.into_iter().filter(|(s, _)| *s > step) {
+        std::fs::remove_dir_all(&path)
+            .with_context(|| format!("cannot remove the later snapshot {}", path.display()))?;
     }
     Ok(())
 }

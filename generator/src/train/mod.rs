@@ -32,7 +32,7 @@ pub use config::{Cadence, PatchTraining, TrainConfig};
 pub use data::{FlashPlacement, RealBatch, TrainingData};
 pub use driver::{
     GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan, SNAPSHOTS_DIR,
-    snapshot_folder,
+    snapshot_folder, snapshot_folders,
 };
 pub use trainer::{
     PhaseSeconds, StepStats, Trainer, enable_second_order_gradients, fresh_discriminator,
