@@ -30,6 +30,11 @@ const TINY: [&str; 6] = [
     "16",
 ];
 
+/// The flags of the tiny model followed by `extra`.
+fn tiny_with<'a>(extra: &[&'a str]) -> Vec<&'a str> {
+    TINY.iter().copied().chain(extra.iter().copied()).collect()
+}
+
 fn train(data: Option<&str>, run: &Path, extra: &[&str]) -> anyhow::Result<String> {
     let mut args = vec!["train-gan", "--out", run.to_str().unwrap()];
     if let Some(d) = data {
@@ -46,22 +51,18 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
     let data = simulated_dataset(dir.path(), 64);
     let data = path_str(&data).to_string();
     let whole = dir.path().join("whole");
-    let flags: Vec<&str> = TINY
-        .iter()
-        .copied()
-        .chain([
-            "--steps",
-            "3",
-            "--sample-every",
-            "2",
-            "--seed",
-            "5",
-            "--swd-every",
-            "3",
-            "--swd-count",
-            "8",
-        ])
-        .collect();
+    let flags = tiny_with(&[
+        "--steps",
+        "3",
+        "--sample-every",
+        "2",
+        "--seed",
+        "5",
+        "--swd-every",
+        "3",
+        "--swd-count",
+        "8",
+    ]);
     let out = train(Some(&data), &whole, &flags).unwrap();
     assert!(out.contains("trained 3 steps"), "{out}");
     for f in [
@@ -98,11 +99,7 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
 
     // 2 steps, then resume to 3: the same bytes as the uninterrupted run.
     let split = dir.path().join("split");
-    let short: Vec<&str> = TINY
-        .iter()
-        .copied()
-        .chain(["--steps", "2", "--seed", "5"])
-        .collect();
+    let short = tiny_with(&["--steps", "2", "--seed", "5"]);
     train(Some(&data), &split, &short).unwrap();
     let out = train(None, &split, &["--resume", "--steps", "3"]).unwrap();
     assert!(out.contains("trained 1 steps (3 in total"), "{out}");
@@ -236,11 +233,7 @@ fn train_gan_resume_keeps_the_cadence_may_lower_the_lr_and_the_folder_is_locked(
     let data = simulated_dataset(dir.path(), 64);
     let data = path_str(&data).to_string();
     let run = dir.path().join("run");
-    let flags: Vec<&str> = TINY
-        .iter()
-        .copied()
-        .chain(["--steps", "2", "--sample-every", "1", "--swd-every", "0"])
-        .collect();
+    let flags = tiny_with(&["--steps", "2", "--sample-every", "1", "--swd-every", "0"]);
     train(Some(&data), &run, &flags).unwrap();
     // Resumed without the cadence flags: a sample grid after every step still.
     train(None, &run, &["--resume", "--steps", "4"]).unwrap();
@@ -280,7 +273,7 @@ fn eval_gan_discriminator_probe_reads_the_runs_d() {
     let data = simulated_dataset(dir.path(), 64);
     let data = path_str(&data).to_string();
     let run = dir.path().join("run");
-    let flags: Vec<&str> = TINY.iter().copied().chain(["--steps", "2"]).collect();
+    let flags = tiny_with(&["--steps", "2"]);
     train(Some(&data), &run, &flags).unwrap();
     // `eval-gan --discriminator` on `gan` with `seed`, as JSON or as the table.
     let eval = |gan: &Path, seed: &str, json: bool| {
@@ -351,11 +344,7 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
     let data = simulated_dataset(dir.path(), 64);
     let data = path_str(&data).to_string();
     let run = dir.path().join("run");
-    let flags: Vec<&str> = TINY
-        .iter()
-        .copied()
-        .chain(["--steps", "3", "--snapshot-every", "1", "--swd-every", "0"])
-        .collect();
+    let flags = tiny_with(&["--steps", "3", "--snapshot-every", "1", "--swd-every", "0"]);
     train(Some(&data), &run, &flags).unwrap();
     let snapshot = |step: u64| run.join(format!("snapshots/step-{step:06}"));
     for step in 1..=3 {
@@ -512,7 +501,7 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
 
     // A run without snapshots says how to keep them.
     let plain = dir.path().join("plain");
-    let flags: Vec<&str> = TINY.iter().copied().chain(["--steps", "1"]).collect();
+    let flags = tiny_with(&["--steps", "1"]);
     train(Some(&data), &plain, &flags).unwrap();
     let err = photomat_error(&["rank-snapshots", path_str(&plain)]);
     assert!(err.contains("--snapshot-every"), "{err}");
