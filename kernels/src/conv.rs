@@ -24,6 +24,12 @@
 //! `⟨dy, F(x, W)⟩ = ⟨x, Gx(dy, W)⟩ = ⟨W, Gw(x, dy)⟩` give every backward:
 //! `F: (Gx(g, W), Gw(x, g))`, `Gx(dy, W): (F(g, W), Gw(g, dy))`, `Gw(x, dy): (Gx(dy, g), F(x, g))`.
 //!
+//! On CPUs with AVX-512, f32 forwards whose output width is a multiple of 16, and the input
+//! gradients of such stride-1 "same" or zero-padded convolutions, run on the direct kernels of
+//! [`crate::direct_conv`] instead, which read a padded copy of the input in place rather than
+//! `col(x)` (`docs/benchmarks.md`, "A direct convolution kernel"); the weight gradient and
+//! f64 stay here.
+//!
 //! CPU tensors of dtype f32 and f64 take this path; other devices and dtypes fall back to
 //! [`conv2d_reference`] (candle's `conv2d`, circular padding by `narrow` + `cat`), as does
 //! every call inside [`crate::reference::with_reference_ops`].
@@ -34,6 +40,7 @@ use gemm::Parallelism;
 use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
+use crate::direct_conv;
 
 /// Target size of one band of `col(x)`: half a core's L2 (1 MiB on the build machine), so that
 /// the band is still in L2 when `gemm` packs it, while `gemm` still sees ≥ a few hundred
@@ -134,18 +141,18 @@ pub(crate) fn fast_path(a: &Tensor, b: &Tensor) -> Result<bool> {
 /// Sizes of one convolution, checked once.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct Geometry {
-    b: usize,
-    ci: usize,
-    h: usize,
-    w: usize,
-    co: usize,
-    kh: usize,
-    kw: usize,
-    stride: usize,
-    pad: usize,
-    circular: bool,
-    ho: usize,
-    wo: usize,
+    pub(crate) b: usize,
+    pub(crate) ci: usize,
+    pub(crate) h: usize,
+    pub(crate) w: usize,
+    pub(crate) co: usize,
+    pub(crate) kh: usize,
+    pub(crate) kw: usize,
+    pub(crate) stride: usize,
+    pub(crate) pad: usize,
+    pub(crate) circular: bool,
+    pub(crate) ho: usize,
+    pub(crate) wo: usize,
 }
 
 impl Geometry {
@@ -203,7 +210,7 @@ impl Geometry {
     }
 
     /// Rows of the lowered matrix: C_in·kh·kw.
-    fn k(&self) -> usize {
+    pub(crate) fn k(&self) -> usize {
         self.ci * self.kh * self.kw
     }
 
@@ -242,6 +249,12 @@ impl Geometry {
             lo
         };
         TapMap { idx, lo, hi }
+    }
+
+    /// Input index for padded position `padded` (input index + `pad`) along an axis of
+    /// length `n`: wrapped when circular, `None` when zero-padded.
+    pub(crate) fn source_index(&self, padded: usize, pad: usize, n: usize) -> Option<usize> {
+        Some(self.source(padded, pad, n)).filter(|&i| i != OUTSIDE)
     }
 
     /// Input index for padded position `padded` (input index + `pad`) along an axis of
@@ -488,6 +501,33 @@ fn over_batch<R: Send>(
         .collect()
 }
 
+/// Whether the direct kernels of [`crate::direct_conv`] may run: yes unless the environment
+/// variable `PHOTOMAT_NO_DIRECT_CONV` is set, which sends every convolution to im2col + `gemm`
+/// (same-binary A/B measurements, `docs/benchmarks.md`). Read once per process.
+fn direct_conv_enabled() -> bool {
+    static ENABLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ENABLED.get_or_init(|| std::env::var_os("PHOTOMAT_NO_DIRECT_CONV").is_none())
+}
+
+/// The three operands as f32 slices when `T` is f32 and the direct kernels are enabled.
+fn as_f32<'a, T: WithDType>(
+    a: &'a [T],
+    b: &'a [T],
+    out: &'a mut [T],
+) -> Option<(&'a [f32], &'a [f32], &'a mut [f32])> {
+    if T::DTYPE != DType::F32 || !direct_conv_enabled() {
+        return None;
+    }
+    // SAFETY: `T` is f32 (its DTYPE says so), so the slices' elements are f32.
+    unsafe {
+        Some((
+            std::slice::from_raw_parts(a.as_ptr() as *const f32, a.len()),
+            std::slice::from_raw_parts(b.as_ptr() as *const f32, b.len()),
+            std::slice::from_raw_parts_mut(out.as_mut_ptr() as *mut f32, out.len()),
+        ))
+    }
+}
+
 /// Forward: writes every element of `y` (B·C_out·H_out·W_out).
 ///
 /// Bands of output rows write disjoint parts of `y`, so when the batch is smaller than the
@@ -502,6 +542,10 @@ pub(crate) fn forward_into<T: WithDType>(
     y: &mut [T],
     threads: usize,
 ) {
+    if let Some((x, w, y)) = as_f32(x, w, y).filter(|_| direct_conv::supports_forward(g)) {
+        direct_conv::forward(g, x, w, y, threads);
+        return;
+    }
     let (x_len, y_len, k) = (g.ci * g.h * g.w, g.co * g.ho * g.wo, g.k());
     let n_out = g.ho * g.wo;
     let (y_addr, y_total) = (y.as_mut_ptr() as usize, y.len());
@@ -564,6 +608,10 @@ pub(crate) fn forward_into<T: WithDType>(
 
 /// Input gradient: writes every element of `dx` (B·C_in·H·W) from `dy` and `w`.
 fn input_grad_into<T: WithDType>(g: &Geometry, dy: &[T], w: &[T], dx: &mut [T], threads: usize) {
+    if let Some((dy, w, dx)) = as_f32(dy, w, dx).filter(|_| direct_conv::supports_input_grad(g)) {
+        direct_conv::input_grad(g, dy, w, dx, threads);
+        return;
+    }
     let (x_len, y_len, k) = (g.ci * g.h * g.w, g.co * g.ho * g.wo, g.k());
     let n_out = g.ho * g.wo;
     let dx_addr = dx.as_mut_ptr() as usize;

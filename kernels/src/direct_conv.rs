@@ -1,0 +1,477 @@
+//! Direct stride-1 convolution of f32 images on AVX-512: the forward and input-gradient
+//! kernels of [`crate::conv`] for the layers that dominate the generator's, discriminator's
+//! and estimator's steps (3×3, "same" padding, image width a multiple of 16).
+//!
+//! im2col + `gemm` copies every input texel `kh·kw` times into `col(x)` and has `gemm` pack it
+//! again; here the input is copied once, into a padded plane per channel (zeros or wrapped
+//! texels, as the padding mode says), and a register-blocked kernel reads it in place, the
+//! scheme of direct convolutions on SIMD CPUs (Georganas et al., "Anatomy of high-performance
+//! deep learning convolutions on SIMD architectures", SC 2018; oneDNN's direct kernels, which
+//! PyTorch CPU calls). With the activations kept in NCHW order, one AVX-512 vector holds 16
+//! consecutive output texels of one channel; a tile of [`OC_BLOCK`] output channels ×
+//! [`TILE_VECTORS`] vectors (24 accumulators of the 32 registers) is summed over every input
+//! channel and kernel tap:
+//!
+//! ```text
+//! y[o, p..p+16] += W[o, c, ky, kx] · xpad[c, p + ky·Wpad + kx .. +16]   (p: padded row-major)
+//! ```
+//!
+//! one broadcast weight and one unaligned load per tile row and column. The weights are
+//! repacked once per call so that the tile's [`OC_BLOCK`] weights of one (c, ky, kx) are
+//! adjacent. The input gradient of a stride-1 convolution is itself such a convolution, of `dy`
+//! with the kernel flipped in both axes and its two channel axes swapped, padded by
+//! `k − 1 − p` (for circular padding only when `2p = k − 1`, where output and input planes
+//! have the same size and the wrap-around has the same period).
+//!
+//! Only f32 on CPUs with AVX-512F take this path ([`supports_forward`],
+//! [`supports_input_grad`]); everything else stays on im2col + `gemm`, which the equivalence
+//! tests compare it with.
+
+use rayon::prelude::*;
+
+use crate::conv::{Conv2dSpec, Geometry, PaddingMode};
+
+/// f32 lanes of one AVX-512 vector: output texels per accumulator.
+const LANES: usize = 16;
+/// Output channels per register tile.
+const OC_BLOCK: usize = 6;
+/// Vectors of 16 output texels per register tile: `OC_BLOCK × TILE_VECTORS` = 24
+/// accumulators, plus `TILE_VECTORS` input vectors and one broadcast weight, of 32 registers.
+const TILE_VECTORS: usize = 4;
+
+/// Whether this CPU has the AVX-512 foundation instructions the kernel uses.
+fn has_avx512() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx512f")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// Whether [`forward`] computes this convolution: stride 1, output rows of whole vectors.
+pub(crate) fn supports_forward(g: &Geometry) -> bool {
+    g.wo.is_multiple_of(LANES) && has_avx512()
+}
+
+/// The forward convolution whose value is the input gradient of `g`, with its
+/// flipped-and-transposed kernel's geometry; `None` when that is not a stride-1 convolution
+/// [`forward`] handles (module docs).
+pub(crate) fn input_grad_geometry(g: &Geometry) -> Option<Geometry> {
+    if g.stride != 1
+        || g.pad >= g.kh
+        || g.pad >= g.kw
+        || !g.w.is_multiple_of(LANES)
+        || !has_avx512()
+    {
+        return None;
+    }
+    if g.circular && (2 * g.pad + 1 != g.kh || 2 * g.pad + 1 != g.kw) {
+        return None;
+    }
+    // Padding k − 1 − p on both axes: one value, so the kernel must be square.
+    if g.kh != g.kw {
+        return None;
+    }
+    let mode = if g.circular {
+        PaddingMode::Circular
+    } else {
+        PaddingMode::Zeros
+    };
+    let spec = Conv2dSpec {
+        stride: 1,
+        padding: g.kh - 1 - g.pad,
+        mode,
+    };
+    let adjoint = Geometry::new((g.b, g.co, g.ho, g.wo), (g.ci, g.co, g.kh, g.kw), spec).ok()?;
+    (adjoint.ho == g.h && adjoint.wo == g.w).then_some(adjoint)
+}
+
+/// Whether [`input_grad`] computes this convolution's input gradient.
+pub(crate) fn supports_input_grad(g: &Geometry) -> bool {
+    input_grad_geometry(g).is_some()
+}
+
+/// Forward convolution: writes every element of `y` (B·C_out·H_out·W_out) from `x`
+/// (B·C_in·H·W) and `w` (C_out·C_in·kh·kw). Requires [`supports_forward`].
+pub(crate) fn forward(g: &Geometry, x: &[f32], w: &[f32], y: &mut [f32], threads: usize) {
+    assert!(
+        supports_forward(g),
+        "direct conv: unsupported geometry {g:?}"
+    );
+    let packed = pack_weights(g, w, |o, k| w[o * g.k() + k]);
+    run(g, x, &packed, y, threads);
+}
+
+/// Input gradient: writes every element of `dx` (B·C_in·H·W) from `dy` (B·C_out·H_out·W_out)
+/// and `w` (C_out·C_in·kh·kw), as the forward convolution of `dy` with the flipped,
+/// transposed kernel. Requires [`supports_input_grad`].
+pub(crate) fn input_grad(g: &Geometry, dy: &[f32], w: &[f32], dx: &mut [f32], threads: usize) {
+    let adjoint = input_grad_geometry(g).expect("direct conv: unsupported input gradient");
+    let (kh, kw, taps) = (g.kh, g.kw, g.kh * g.kw);
+    // Adjoint kernel [c][o][ky'][kx'] = W[o][c][kh−1−ky'][kw−1−kx'].
+    let packed = pack_weights(&adjoint, w, |c, k| {
+        let (o, tap) = (k / taps, k % taps);
+        let (ky, kx) = (tap / kw, tap % kw);
+        w[((o * g.ci + c) * kh + kh - 1 - ky) * kw + kw - 1 - kx]
+    });
+    run(&adjoint, dy, &packed, dx, threads);
+}
+
+/// Weights in tile order: block `b` of [`OC_BLOCK`] output channels, then lowered row
+/// `k = (c·kh + ky)·kw + kx`, then the block's channels, zeros past `C_out`.
+/// `weight(o, k)` is element (o, k) of the C_out × K kernel matrix.
+fn pack_weights(g: &Geometry, _w: &[f32], weight: impl Fn(usize, usize) -> f32) -> Vec<f32> {
+    let (k, blocks) = (g.k(), g.co.div_ceil(OC_BLOCK));
+    let mut packed = vec![0.0; blocks * k * OC_BLOCK];
+    for (b, block) in packed.chunks_exact_mut(k * OC_BLOCK).enumerate() {
+        for (kk, row) in block.chunks_exact_mut(OC_BLOCK).enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                let o = b * OC_BLOCK + j;
+                if o < g.co {
+                    *v = weight(o, kk);
+                }
+            }
+        }
+    }
+    packed
+}
+
+/// Layout of the padded copy of one image: `Hp = H + 2p` rows per channel, each row the
+/// `s` phases of its `Wp = W + 2p` padded columns one after the other (column `j` at
+/// `(j mod s)·phase + j / s`), so that output texels `ox..ox+16` of a stride-`s` convolution
+/// read 16 consecutive floats for every tap.
+#[derive(Clone, Copy)]
+struct Padded {
+    /// Floats per phase: ⌈Wp / s⌉.
+    phase: usize,
+    /// Floats per padded row: `s · phase`.
+    row: usize,
+    /// Floats per channel: `Hp · row`.
+    plane: usize,
+}
+
+impl Padded {
+    fn new(g: &Geometry) -> Self {
+        let (hp, wp) = (g.h + 2 * g.pad, g.w + 2 * g.pad);
+        let phase = wp.div_ceil(g.stride);
+        let row = g.stride * phase;
+        Self {
+            phase,
+            row,
+            plane: hp * row,
+        }
+    }
+
+    /// Offset of padded texel (row 0, column `kx`) + `ky` rows: where tap (ky, kx) reads for
+    /// output texel (0, 0).
+    fn tap(&self, g: &Geometry, ky: usize, kx: usize) -> usize {
+        ky * self.row + (kx % g.stride) * self.phase + kx / g.stride
+    }
+
+    /// Offset of the padded texel tap (0, 0) reads for output texel (oy, ox).
+    fn origin(&self, g: &Geometry, oy: usize, ox: usize) -> usize {
+        g.stride * oy * self.row + ox
+    }
+}
+
+/// Copies image `x` (C_in·H·W) into `xp` (C_in·[`Padded::plane`]), padded by zeros or
+/// wrapped. Floats of a row past its `Wp` columns (the last phase's tail) are left as they are.
+fn pad_image(g: &Geometry, layout: Padded, x: &[f32], xp: &mut [f32]) {
+    let (hp, wp, p, s) = (g.h + 2 * g.pad, g.w + 2 * g.pad, g.pad, g.stride);
+    let cols: Vec<Option<usize>> = (0..wp).map(|j| g.source_index(j, p, g.w)).collect();
+    for c in 0..g.ci {
+        let plane = &x[c * g.h * g.w..(c + 1) * g.h * g.w];
+        for r in 0..hp {
+            let dst = &mut xp[c * layout.plane + r * layout.row..][..layout.row];
+            match g.source_index(r, p, g.h) {
+                None => dst.fill(0.0),
+                Some(iy) => {
+                    let src = &plane[iy * g.w..(iy + 1) * g.w];
+                    if s == 1 {
+                        dst[p..p + g.w].copy_from_slice(src);
+                        for j in (0..p).chain(p + g.w..wp) {
+                            dst[j] = cols[j].map_or(0.0, |ix| src[ix]);
+                        }
+                    } else {
+                        for (j, col) in cols.iter().enumerate() {
+                            dst[(j % s) * layout.phase + j / s] = col.map_or(0.0, |ix| src[ix]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// Runs the tiles of every image: images in parallel when there are at least as many as
+/// threads, else bands of tiles of one image at a time.
+fn run(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], threads: usize) {
+    let (x_len, y_len) = (g.ci * g.h * g.w, g.co * g.ho * g.wo);
+    let layout = Padded::new(g);
+    let xp_len = g.ci * layout.plane;
+    let vectors = g.ho * g.wo / LANES;
+    let tiles = vectors.div_ceil(TILE_VECTORS);
+    if threads <= 1 || g.b >= threads {
+        let per = g.b.div_ceil(threads.max(1));
+        y.par_chunks_mut(per * y_len)
+            .zip(x.par_chunks(per * x_len))
+            .for_each(|(ys, xs)| {
+                let mut xp = vec![0.0; xp_len];
+                for (yi, xi) in ys.chunks_exact_mut(y_len).zip(xs.chunks_exact(x_len)) {
+                    pad_image(g, layout, xi, &mut xp);
+                    let y_addr = yi.as_mut_ptr() as usize;
+                    // SAFETY: one task writes all of image yi.
+                    unsafe { run_tiles(g, &xp, packed, y_addr, 0..tiles) };
+                }
+            });
+        return;
+    }
+    let bands = (2 * threads).min(tiles);
+    let per = tiles.div_ceil(bands);
+    let mut xp = vec![0.0; xp_len];
+    for (yi, xi) in y.chunks_exact_mut(y_len).zip(x.chunks_exact(x_len)) {
+        pad_image(g, layout, xi, &mut xp);
+        let y_addr = yi.as_mut_ptr() as usize;
+        (0..tiles.div_ceil(per)).into_par_iter().for_each(|band| {
+            let range = band * per..((band + 1) * per).min(tiles);
+            // SAFETY: bands write disjoint tiles of image yi, which outlives them.
+            unsafe { run_tiles(g, &xp, packed, y_addr, range) };
+        });
+    }
+}
+
+/// Computes tiles `range` (groups of [`TILE_VECTORS`] output vectors in row-major order) of
+/// every output channel of one image from its padded copy `xp`.
+///
+/// # Safety
+/// `y_addr` points to the image's C_out·H_out·W_out outputs; no other thread writes the
+/// elements of these tiles while this runs.
+unsafe fn run_tiles(
+    g: &Geometry,
+    xp: &[f32],
+    packed: &[f32],
+    y_addr: usize,
+    range: std::ops::Range<usize>,
+) {
+    let layout = Padded::new(g);
+    let plane_in = layout.plane;
+    let plane_out = g.ho * g.wo;
+    let vectors = plane_out / LANES;
+    let taps: Vec<usize> = (0..g.kh)
+        .flat_map(|ky| (0..g.kw).map(move |kx| layout.tap(g, ky, kx)))
+        .collect();
+    let k = g.k();
+    // (input offset, output offset) of output vector v.
+    let at = |v: usize| {
+        let (oy, ox) = ((v * LANES) / g.wo, (v * LANES) % g.wo);
+        (layout.origin(g, oy, ox), oy * g.wo + ox)
+    };
+    let y = y_addr as *mut f32;
+    for t in range {
+        let first = t * TILE_VECTORS;
+        let count = TILE_VECTORS.min(vectors - first);
+        for b in 0..g.co.div_ceil(OC_BLOCK) {
+            let wb = &packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
+            let rows = OC_BLOCK.min(g.co - b * OC_BLOCK);
+            let y_block = unsafe { y.add(b * OC_BLOCK * plane_out) };
+            if count == TILE_VECTORS {
+                let mut ins = [0; TILE_VECTORS];
+                let mut outs = [0; TILE_VECTORS];
+                for j in 0..TILE_VECTORS {
+                    (ins[j], outs[j]) = at(first + j);
+                }
+                // SAFETY: AVX-512F was detected (`supports_forward`); loads stay inside
+                // `xp` (offset + tap + 16 ≤ padded plane), stores inside the tile's outputs.
+                unsafe {
+                    tile::<TILE_VECTORS>(
+                        xp, plane_in, g.ci, &taps, ins, wb, y_block, plane_out, outs, rows,
+                    )
+                };
+            } else {
+                for j in first..first + count {
+                    let (i, o) = at(j);
+                    // SAFETY: as above, one vector.
+                    unsafe {
+                        tile::<1>(
+                            xp,
+                            plane_in,
+                            g.ci,
+                            &taps,
+                            [i],
+                            wb,
+                            y_block,
+                            plane_out,
+                            [o],
+                            rows,
+                        )
+                    };
+                }
+            }
+        }
+    }
+}
+
+/// One register tile: `rows` (≤ [`OC_BLOCK`]) output channels × `NV` vectors, summed over
+/// `ci` channels and the taps, stored at `y + o·plane_out + outs[j]`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn tile<const NV: usize>(
+    xp: &[f32],
+    plane_in: usize,
+    ci: usize,
+    taps: &[usize],
+    ins: [usize; NV],
+    wb: &[f32],
+    y: *mut f32,
+    plane_out: usize,
+    outs: [usize; NV],
+    rows: usize,
+) {
+    use std::arch::x86_64::*;
+    let mut acc = [[_mm512_setzero_ps(); NV]; OC_BLOCK];
+    let mut w = wb.as_ptr();
+    let x0 = xp.as_ptr();
+    for c in 0..ci {
+        let xc = unsafe { x0.add(c * plane_in) };
+        for &t in taps {
+            let mut xv = [_mm512_setzero_ps(); NV];
+            for j in 0..NV {
+                xv[j] = unsafe { _mm512_loadu_ps(xc.add(ins[j] + t)) };
+            }
+            for (o, row) in acc.iter_mut().enumerate() {
+                let wv = _mm512_set1_ps(unsafe { *w.add(o) });
+                for j in 0..NV {
+                    row[j] = _mm512_fmadd_ps(xv[j], wv, row[j]);
+                }
+            }
+            w = unsafe { w.add(OC_BLOCK) };
+        }
+    }
+    for (o, row) in acc.iter().enumerate().take(rows) {
+        for j in 0..NV {
+            unsafe { _mm512_storeu_ps(y.add(o * plane_out + outs[j]), row[j]) };
+        }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[allow(clippy::too_many_arguments)]
+unsafe fn tile<const NV: usize>(
+    _: &[f32],
+    _: usize,
+    _: usize,
+    _: &[usize],
+    _: [usize; NV],
+    _: &[f32],
+    _: *mut f32,
+    _: usize,
+    _: [usize; NV],
+    _: usize,
+) {
+    unreachable!("AVX-512 only: supports_forward is false on this architecture")
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{DType, Device, Result, Tensor};
+
+    use super::*;
+    use crate::conv::{apply_input_grad, conv2d_reference};
+    use crate::testing::max_abs_diff;
+    use photomat_core::rng::pseudo_random;
+
+    /// (B, C_in, H, W, C_out, k, stride, padding).
+    type Case = (usize, usize, usize, usize, usize, usize, usize, usize);
+
+    /// Widths of whole vectors (16, 32) with one
+    /// and several tiles, partial tiles (5 rows × 2 vectors = 10 vectors), partial channel
+    /// blocks (C_out 7 and 13 against blocks of 6), 1×1, 3×3, 4×4 and 5×5 kernels, unpadded
+    /// 3×3 convolutions whose forward (W 18 → 16) or input gradient (W 16) alone is direct,
+    /// and stride 2 on odd and even widths (the discriminator's 33 → 16 after its blur, the
+    /// estimator's padded 4×4), whose input gradients stay on im2col.
+    const CASES: &[Case] = &[
+        (2, 5, 16, 16, 7, 3, 1, 1),
+        (1, 3, 5, 32, 13, 3, 1, 1),
+        (2, 4, 6, 16, 3, 1, 1, 0),
+        (1, 3, 8, 18, 5, 3, 1, 0),
+        (1, 3, 8, 16, 5, 3, 1, 0),
+        (1, 2, 7, 16, 3, 5, 1, 2),
+        (3, 2, 4, 16, 6, 3, 1, 1),
+        (2, 3, 9, 33, 5, 3, 2, 0),
+        (1, 4, 6, 32, 7, 4, 2, 1),
+    ];
+
+    #[test]
+    fn direct_conv_matches_the_f64_reference_and_its_input_gradient() -> Result<()> {
+        if !has_avx512() {
+            eprintln!("no AVX-512 on this CPU: the direct kernels are never used");
+            return Ok(());
+        }
+        let dev = Device::Cpu;
+        let mut direct = (0, 0);
+        for (seed, &(b, ci, h, w, co, k, stride, p)) in CASES.iter().enumerate() {
+            for mode in [PaddingMode::Zeros, PaddingMode::Circular] {
+                let spec = Conv2dSpec {
+                    stride,
+                    padding: p,
+                    mode,
+                };
+                let seed = 5 * seed as u64;
+                let x = pseudo_random((b, ci, h, w), seed, DType::F64, &dev)?;
+                let wt = pseudo_random((co, ci, k, k), seed + 1, DType::F64, &dev)?;
+                let g = Geometry::new(x.dims4()?, wt.dims4()?, spec)?;
+                let dy = pseudo_random(g.y_shape(), seed + 2, DType::F64, &dev)?;
+                let y_ref = conv2d_reference(&x, &wt, spec)?;
+                let dx_ref = apply_input_grad(g, &dy, &wt)?;
+                let f32s = |t: &Tensor| t.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>();
+                let (xv, wv, dyv) = (f32s(&x)?, f32s(&wt)?, f32s(&dy)?);
+                let case = format!("{mode:?} x{:?} co {co} k{k} s{stride} p{p}", (b, ci, h, w));
+                // f32 sums of ≤ 3·25 = 75 products of values in [−1, 1]: rounding ≲ 75·6e-8;
+                // a wrong tap or channel is off by O(0.1).
+                let tol = 1e-4;
+                for threads in [1, 2, 3] {
+                    if supports_forward(&g) {
+                        direct.0 += 1;
+                        let mut y = vec![f32::NAN; g.y_shape().elem_count()];
+                        forward(&g, &xv, &wv, &mut y, threads);
+                        let y = Tensor::from_vec(y, g.y_shape(), &dev)?.to_dtype(DType::F64)?;
+                        let err = max_abs_diff(&y, &y_ref)?;
+                        assert!(err < tol, "forward {case} threads {threads}: {err}");
+                    }
+                    if supports_input_grad(&g) {
+                        direct.1 += 1;
+                        let mut dx = vec![f32::NAN; g.x_shape().elem_count()];
+                        input_grad(&g, &dyv, &wv, &mut dx, threads);
+                        let dx = Tensor::from_vec(dx, g.x_shape(), &dev)?.to_dtype(DType::F64)?;
+                        let err = max_abs_diff(&dx, &dx_ref)?;
+                        assert!(err < tol, "input gradient {case} threads {threads}: {err}");
+                    }
+                }
+            }
+        }
+        // Of the 18 (case, mode) pairs, 16 forwards are direct (not the unpadded one at W 16,
+        // 14 output columns) and 11 input gradients (not the unpadded one at W 18, nor the
+        // unpadded circular 3×3, whose adjoint has another period, nor the strided ones), at
+        // 3 thread counts: the gates did not silently turn the kernels off.
+        assert_eq!(direct, (3 * 16, 3 * 11));
+        Ok(())
+    }
+
+    #[test]
+    fn direct_conv_declines_what_it_does_not_compute() -> Result<()> {
+        let g = |x, w, spec| Geometry::new(x, w, spec);
+        // A strided input gradient, a row of 8 texels, and circular padding that is not
+        // "same".
+        let strided = g((1, 2, 16, 32), (2, 2, 4, 4), Conv2dSpec::zeros(2, 1))?;
+        assert!(!supports_input_grad(&strided));
+        let narrow = g((1, 2, 8, 8), (2, 2, 3, 3), Conv2dSpec::circular(1, 1))?;
+        assert!(!supports_forward(&narrow) && !supports_input_grad(&narrow));
+        let wrapped = g((1, 2, 16, 16), (2, 2, 3, 3), Conv2dSpec::circular(1, 2))?;
+        assert!(input_grad_geometry(&wrapped).is_none());
+        Ok(())
+    }
+}
