@@ -8,8 +8,8 @@
 //! scheme of direct convolutions on SIMD CPUs (Georganas et al., "Anatomy of high-performance
 //! deep learning convolutions on SIMD architectures", SC 2018; oneDNN's direct kernels, which
 //! PyTorch CPU calls). With the activations kept in NCHW order, one AVX-512 vector holds 16
-//! consecutive output texels of one channel; a tile of [`OC_BLOCK`] output channels ×
-//! [`TILE_VECTORS`] vectors (24 accumulators of the 32 registers) is summed over every input
+//! consecutive output texels of one channel; a tile of `OC_BLOCK` output channels ×
+//! `TILE_VECTORS` vectors (24 accumulators of the 32 registers) is summed over every input
 //! channel and kernel tap:
 //!
 //! ```text
@@ -17,14 +17,14 @@
 //! ```
 //!
 //! one broadcast weight and one unaligned load per tile row and column. The weights are
-//! repacked once per call so that the tile's [`OC_BLOCK`] weights of one (c, ky, kx) are
+//! repacked once per call so that the tile's `OC_BLOCK` weights of one (c, ky, kx) are
 //! adjacent. The input gradient of a stride-1 convolution is itself such a convolution, of `dy`
 //! with the kernel flipped in both axes and its two channel axes swapped, padded by
 //! `k − 1 − p` (for circular padding only when `2p = k − 1`, where output and input planes
 //! have the same size and the wrap-around has the same period).
 //!
-//! Only f32 on CPUs with AVX-512F take this path ([`supports_forward`],
-//! [`supports_input_grad`]); everything else stays on im2col + `gemm`, which the equivalence
+//! Only f32 on CPUs with AVX-512F take this path (`supports_forward`,
+//! `supports_input_grad`); everything else stays on im2col + `gemm`, which the equivalence
 //! tests compare it with.
 
 use rayon::prelude::*;
