@@ -24,11 +24,12 @@
 //! `⟨dy, F(x, W)⟩ = ⟨x, Gx(dy, W)⟩ = ⟨W, Gw(x, dy)⟩` give every backward:
 //! `F: (Gx(g, W), Gw(x, g))`, `Gx(dy, W): (F(g, W), Gw(g, dy))`, `Gw(x, dy): (Gx(dy, g), F(x, g))`.
 //!
-//! On CPUs with AVX-512, f32 forwards whose output width is a multiple of 16, and the input
-//! gradients of such stride-1 "same" or zero-padded convolutions, run on the direct kernels of
-//! [`crate::direct_conv`] instead, which read a padded copy of the input in place rather than
-//! `col(x)` (`docs/benchmarks.md`, "A direct convolution kernel"); the weight gradient and
-//! f64 stay here.
+//! On CPUs with AVX-512, f32 convolutions other than pointwise ones run on the direct kernels
+//! of [`crate::direct_conv`] instead, which read a padded copy of the input in place rather
+//! than `col(x)` (`docs/benchmarks.md`, "A direct convolution kernel"): forwards whose output
+//! width is a multiple of 16, the input gradients of such stride-1 convolutions, and every
+//! weight gradient. Pointwise convolutions (whose `col(x)` is `x` itself), strided input
+//! gradients, narrow layers and f64 stay here.
 //!
 //! CPU tensors of dtype f32 and f64 take this path; other devices and dtypes fall back to
 //! [`conv2d_reference`] (candle's `conv2d`, circular padding by `narrow` + `cat`), as does
@@ -215,7 +216,7 @@ impl Geometry {
     }
 
     /// A 1×1 stride-1 unpadded convolution: `col(x)` is `x`.
-    fn is_pointwise(&self) -> bool {
+    pub(crate) fn is_pointwise(&self) -> bool {
         self.kh == 1 && self.kw == 1 && self.stride == 1 && self.pad == 0
     }
 
@@ -661,6 +662,10 @@ fn input_grad_into<T: WithDType>(g: &Geometry, dy: &[T], w: &[T], dx: &mut [T], 
 
 /// Weight gradient: writes every element of `dw` (C_out·C_in·kh·kw) from `x` and `dy`.
 fn weight_grad_into<T: WithDType>(g: &Geometry, x: &[T], dy: &[T], dw: &mut [T], threads: usize) {
+    if let Some((x, dy, dw)) = as_f32(x, dy, dw).filter(|_| direct_conv::supports_weight_grad(g)) {
+        direct_conv::weight_grad(g, x, dy, dw, threads);
+        return;
+    }
     let (x_len, y_len, k) = (g.ci * g.h * g.w, g.co * g.ho * g.wo, g.k());
     let n_out = g.ho * g.wo;
     let maps: Vec<TapMap> = (0..g.kw).map(|kx| g.column_map(kx)).collect();

@@ -1,31 +1,41 @@
-//! Direct stride-1 convolution of f32 images on AVX-512: the forward and input-gradient
-//! kernels of [`crate::conv`] for the layers that dominate the generator's, discriminator's
-//! and estimator's steps (3×3, "same" padding, image width a multiple of 16).
+//! Direct convolution of f32 images on AVX-512: the forward, input-gradient and
+//! weight-gradient kernels of [`crate::conv`] for the layers that dominate the generator's,
+//! discriminator's and estimator's steps (3×3 and 4×4, strides 1 and 2).
 //!
 //! im2col + `gemm` copies every input texel `kh·kw` times into `col(x)` and has `gemm` pack it
 //! again; here the input is copied once, into a padded plane per channel (zeros or wrapped
-//! texels, as the padding mode says), and a register-blocked kernel reads it in place, the
-//! scheme of direct convolutions on SIMD CPUs (Georganas et al., "Anatomy of high-performance
-//! deep learning convolutions on SIMD architectures", SC 2018; oneDNN's direct kernels, which
-//! PyTorch CPU calls). With the activations kept in NCHW order, one AVX-512 vector holds 16
+//! texels, as the padding mode says; for stride `s` each padded row is stored as its `s`
+//! column phases, so that output texels `ox..ox+16` read 16 consecutive floats for every
+//! tap), and register-blocked kernels read it in place, the scheme of direct convolutions on
+//! SIMD CPUs (Georganas et al., "Anatomy of high-performance deep learning convolutions on
+//! SIMD architectures", SC 2018; oneDNN's direct kernels, which PyTorch CPU calls).
+//!
+//! **Forward.** With the activations kept in NCHW order, one AVX-512 vector holds 16
 //! consecutive output texels of one channel; a tile of `OC_BLOCK` output channels ×
 //! `TILE_VECTORS` vectors (24 accumulators of the 32 registers) is summed over every input
-//! channel and kernel tap:
+//! channel and kernel tap, one broadcast weight and one unaligned load per tile row and column:
 //!
 //! ```text
-//! y[o, p..p+16] += W[o, c, ky, kx] · xpad[c, p + ky·Wpad + kx .. +16]   (p: padded row-major)
+//! y[o, p..p+16] += W[o, c, ky, kx] · xpad[c, origin(p) + tap(ky, kx) .. +16]
 //! ```
 //!
-//! one broadcast weight and one unaligned load per tile row and column. The weights are
-//! repacked once per call so that the tile's `OC_BLOCK` weights of one (c, ky, kx) are
-//! adjacent. The input gradient of a stride-1 convolution is itself such a convolution, of `dy`
+//! The weights are repacked once per call so that the tile's `OC_BLOCK` weights of one
+//! (c, ky, kx) are adjacent. Output rows must be whole vectors (`W_out` a multiple of 16).
+//!
+//! **Input gradient.** That of a stride-1 convolution is itself such a convolution, of `dy`
 //! with the kernel flipped in both axes and its two channel axes swapped, padded by
 //! `k − 1 − p` (for circular padding only when `2p = k − 1`, where output and input planes
-//! have the same size and the wrap-around has the same period).
+//! have the same size and the wrap-around has the same period). Strided ones stay on col2im.
 //!
-//! Only f32 on CPUs with AVX-512F take this path (`supports_forward`,
-//! `supports_input_grad`); everything else stays on im2col + `gemm`, which the equivalence
-//! tests compare it with.
+//! **Weight gradient.** A reduction over texels: the 16 lanes run over output channels instead,
+//! `dy` copied channels-last one L1-sized band of rows at a time, and a tile of `WG_VECTORS`
+//! × 16 output channels × `WG_CHANNELS` input channels of one tap adds `dy` rows times
+//! broadcast input texels, its sums kept channels-last between bands and transposed once.
+//!
+//! Only f32 on CPUs with AVX-512F take this path, and not pointwise convolutions, which `gemm`
+//! already reads in place (`supports_forward`, `supports_input_grad`, `supports_weight_grad`);
+//! everything else stays on im2col + `gemm`, which the equivalence tests compare it with.
+//! Measurements: `docs/benchmarks.md`, "A direct convolution kernel".
 
 use rayon::prelude::*;
 
@@ -53,14 +63,15 @@ fn has_avx512() -> bool {
 
 /// Whether [`forward`] computes this convolution: stride 1, output rows of whole vectors.
 pub(crate) fn supports_forward(g: &Geometry) -> bool {
-    g.wo.is_multiple_of(LANES) && has_avx512()
+    !g.is_pointwise() && g.wo.is_multiple_of(LANES) && has_avx512()
 }
 
 /// The forward convolution whose value is the input gradient of `g`, with its
 /// flipped-and-transposed kernel's geometry; `None` when that is not a stride-1 convolution
 /// [`forward`] handles (module docs).
 pub(crate) fn input_grad_geometry(g: &Geometry) -> Option<Geometry> {
-    if g.stride != 1
+    if g.is_pointwise()
+        || g.stride != 1
         || g.pad >= g.kh
         || g.pad >= g.kw
         || !g.w.is_multiple_of(LANES)
@@ -101,7 +112,7 @@ pub(crate) fn forward(g: &Geometry, x: &[f32], w: &[f32], y: &mut [f32], threads
         supports_forward(g),
         "direct conv: unsupported geometry {g:?}"
     );
-    let packed = pack_weights(g, w, |o, k| w[o * g.k() + k]);
+    let packed = pack_weights(g, |o, k| w[o * g.k() + k]);
     run(g, x, &packed, y, threads);
 }
 
@@ -112,7 +123,7 @@ pub(crate) fn input_grad(g: &Geometry, dy: &[f32], w: &[f32], dx: &mut [f32], th
     let adjoint = input_grad_geometry(g).expect("direct conv: unsupported input gradient");
     let (kh, kw, taps) = (g.kh, g.kw, g.kh * g.kw);
     // Adjoint kernel [c][o][ky'][kx'] = W[o][c][kh−1−ky'][kw−1−kx'].
-    let packed = pack_weights(&adjoint, w, |c, k| {
+    let packed = pack_weights(&adjoint, |c, k| {
         let (o, tap) = (k / taps, k % taps);
         let (ky, kx) = (tap / kw, tap % kw);
         w[((o * g.ci + c) * kh + kh - 1 - ky) * kw + kw - 1 - kx]
@@ -123,7 +134,7 @@ pub(crate) fn input_grad(g: &Geometry, dy: &[f32], w: &[f32], dx: &mut [f32], th
 /// Weights in tile order: block `b` of [`OC_BLOCK`] output channels, then lowered row
 /// `k = (c·kh + ky)·kw + kx`, then the block's channels, zeros past `C_out`.
 /// `weight(o, k)` is element (o, k) of the C_out × K kernel matrix.
-fn pack_weights(g: &Geometry, _w: &[f32], weight: impl Fn(usize, usize) -> f32) -> Vec<f32> {
+fn pack_weights(g: &Geometry, weight: impl Fn(usize, usize) -> f32) -> Vec<f32> {
     let (k, blocks) = (g.k(), g.co.div_ceil(OC_BLOCK));
     let mut packed = vec![0.0; blocks * k * OC_BLOCK];
     for (b, block) in packed.chunks_exact_mut(k * OC_BLOCK).enumerate() {
@@ -375,12 +386,237 @@ unsafe fn tile<const NV: usize>(
     unreachable!("AVX-512 only: supports_forward is false on this architecture")
 }
 
+/// Input channels per weight-gradient tile; with [`WG_VECTORS`] vectors of 16 output
+/// channels, `6 × 4` = 24 accumulators.
+const WG_CHANNELS: usize = 6;
+/// Vectors of 16 output channels per weight-gradient tile.
+const WG_VECTORS: usize = 4;
+/// Bytes of `dy`'s channels-last copy per band of output rows: two thirds of a 48 KiB L1, so
+/// that the band stays in L1 while every (tap, input channel) tile sweeps it.
+const WG_BAND_BYTES: usize = 32 << 10;
+
+/// Whether [`weight_grad`] computes this convolution's weight gradient: every f32 geometry
+/// but a pointwise one, on AVX-512.
+pub(crate) fn supports_weight_grad(g: &Geometry) -> bool {
+    !g.is_pointwise() && has_avx512()
+}
+
+/// Weight gradient: writes every element of `dw` (C_out·C_in·kh·kw) from `x` (B·C_in·H·W)
+/// and `dy` (B·C_out·H_out·W_out),
+///
+/// ```text
+/// dW[o, c, ky, kx] = Σ_b Σ_(oy, ox) dy[b, o, oy, ox] · xpad[b, c, s·oy + ky, s·ox + kx]
+/// ```
+///
+/// with the 16 lanes of a vector over output channels: `dy` is copied channels-last once per
+/// image (row `(oy, ox)` of C_out floats, padded to whole vectors), and a tile of
+/// [`WG_VECTORS`] × 16 output channels × [`WG_CHANNELS`] input channels of one tap adds
+/// `dy` row × broadcast input texel over a band of output rows, its sums kept in a
+/// channels-last gradient buffer between bands. Requires [`supports_weight_grad`]. Tasks
+/// (ranges of images, or of one image's bands when there are fewer images than threads) sum
+/// into their own buffers, added in task order, so the result does not depend on timing.
+pub(crate) fn weight_grad(g: &Geometry, x: &[f32], dy: &[f32], dw: &mut [f32], threads: usize) {
+    assert!(supports_weight_grad(g), "direct conv: unsupported geometry");
+    let (x_len, y_len) = (g.ci * g.h * g.w, g.co * g.ho * g.wo);
+    let co_pad = g.co.next_multiple_of(LANES);
+    let band = (WG_BAND_BYTES / (4 * g.wo * co_pad)).clamp(1, g.ho);
+    let bands = g.ho.div_ceil(band);
+    // (first image, images, bands) of each task.
+    let tasks: Vec<(usize, usize, std::ops::Range<usize>)> = if threads <= 1 || g.b >= threads {
+        let per = g.b.div_ceil(threads.max(1));
+        (0..g.b)
+            .step_by(per)
+            .map(|i| (i, per.min(g.b - i), 0..bands))
+            .collect()
+    } else {
+        let per = bands.div_ceil(threads);
+        (0..g.b)
+            .flat_map(|i| {
+                (0..bands)
+                    .step_by(per)
+                    .map(move |j| (i, 1, j..(j + per).min(bands)))
+            })
+            .collect()
+    };
+    let layout = Padded::new(g);
+    let taps = g.kh * g.kw;
+    let ci_pad = g.ci.next_multiple_of(WG_CHANNELS);
+    let partials: Vec<Vec<f32>> = tasks
+        .into_par_iter()
+        .map(|(first, count, bands)| {
+            // Channels-last sums: [c][tap][o], C_in and C_out padded to whole tiles.
+            let mut sums = vec![0.0; ci_pad * taps * co_pad];
+            let mut xp = vec![0.0; g.ci * layout.plane];
+            let mut dy_rows = vec![0.0; band * g.wo * co_pad];
+            for i in first..first + count {
+                pad_image(g, layout, &x[i * x_len..(i + 1) * x_len], &mut xp);
+                let dyi = &dy[i * y_len..(i + 1) * y_len];
+                for j in bands.clone() {
+                    let rows = j * band..((j + 1) * band).min(g.ho);
+                    channels_last(g, dyi, co_pad, rows.clone(), &mut dy_rows);
+                    weight_grad_band(g, layout, &xp, &dy_rows, co_pad, rows, &mut sums);
+                }
+            }
+            sums
+        })
+        .collect();
+    // Back to dW's [o][c][tap] order, 16 (c, tap) rows of the sums at a time: their reads run
+    // along o, the writes along (c, tap), both within a few cache lines.
+    let row = g.ci * taps;
+    for ct0 in (0..row).step_by(LANES) {
+        let cts = ct0..(ct0 + LANES).min(row);
+        for (o, dw_o) in dw.chunks_exact_mut(row).enumerate() {
+            for ct in cts.clone() {
+                dw_o[ct] = partials.iter().map(|s| s[ct * co_pad + o]).sum();
+            }
+        }
+    }
+}
+
+/// Rows `rows` of one image's `dy` (C_out·H_out·W_out) channels-last into `out`: texel
+/// `(oy, ox)` at `((oy − rows.start)·W_out + ox)·co_pad`, its C_out values then zeros up to
+/// `co_pad`. One band at a time, so that the scattered writes stay in L1.
+fn channels_last(
+    g: &Geometry,
+    dy: &[f32],
+    co_pad: usize,
+    rows: std::ops::Range<usize>,
+    out: &mut [f32],
+) {
+    let plane = g.ho * g.wo;
+    let texels = rows.start * g.wo..rows.end * g.wo;
+    for p in 0..texels.len() {
+        out[p * co_pad + g.co..(p + 1) * co_pad].fill(0.0);
+    }
+    for o in 0..g.co {
+        for (p, v) in dy[o * plane..][texels.clone()].iter().enumerate() {
+            out[p * co_pad + o] = *v;
+        }
+    }
+}
+
+/// Adds the weight gradient of output rows `rows` into `sums` ([c][tap][o], module docs of
+/// [`weight_grad`]) from the padded input `xp` and the band's channels-last `dy_rows`.
+fn weight_grad_band(
+    g: &Geometry,
+    layout: Padded,
+    xp: &[f32],
+    dy_rows: &[f32],
+    co_pad: usize,
+    rows: std::ops::Range<usize>,
+    sums: &mut [f32],
+) {
+    let taps = g.kh * g.kw;
+    let vectors = co_pad / LANES;
+    for t in 0..taps {
+        let shift = layout.tap(g, t / g.kw, t % g.kw);
+        for c0 in (0..g.ci).step_by(WG_CHANNELS) {
+            // Channels past C_in repeat the last one; their sums land in the padding of `sums`.
+            let planes: [usize; WG_CHANNELS] =
+                std::array::from_fn(|b| (c0 + b).min(g.ci - 1) * layout.plane + shift);
+            let sum_at = (c0 * taps + t) * co_pad;
+            for v0 in (0..vectors).step_by(WG_VECTORS) {
+                let n = WG_VECTORS.min(vectors - v0);
+                let at = sum_at + v0 * LANES;
+                // SAFETY: AVX-512F was detected (`supports_weight_grad`); `dy_rows` holds the
+                // band's rows of `co_pad` floats, `xp` the padded texels every tap reads, and
+                // `sums` the tile's 6 rows of `taps · co_pad` apart.
+                unsafe {
+                    match n {
+                        4 => weight_tile::<4>(
+                            g, layout, xp, planes, dy_rows, co_pad, v0, &rows, sums, at, taps,
+                        ),
+                        3 => weight_tile::<3>(
+                            g, layout, xp, planes, dy_rows, co_pad, v0, &rows, sums, at, taps,
+                        ),
+                        2 => weight_tile::<2>(
+                            g, layout, xp, planes, dy_rows, co_pad, v0, &rows, sums, at, taps,
+                        ),
+                        _ => weight_tile::<1>(
+                            g, layout, xp, planes, dy_rows, co_pad, v0, &rows, sums, at, taps,
+                        ),
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// One weight-gradient tile: `NV` vectors of output channels from `v0` × [`WG_CHANNELS`]
+/// input channels (`planes`: each one's padded plane offset plus the tap's shift), summed over
+/// the band's texels onto `sums[at + b·taps·co_pad + 16j ..]`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn weight_tile<const NV: usize>(
+    g: &Geometry,
+    layout: Padded,
+    xp: &[f32],
+    planes: [usize; WG_CHANNELS],
+    dy_rows: &[f32],
+    co_pad: usize,
+    v0: usize,
+    rows: &std::ops::Range<usize>,
+    sums: &mut [f32],
+    at: usize,
+    taps: usize,
+) {
+    use std::arch::x86_64::*;
+    let stride = taps * co_pad;
+    assert!(at + (WG_CHANNELS - 1) * stride + NV * LANES <= sums.len());
+    let s = sums.as_mut_ptr();
+    let mut acc = [[_mm512_setzero_ps(); NV]; WG_CHANNELS];
+    for (b, row) in acc.iter_mut().enumerate() {
+        for (j, a) in row.iter_mut().enumerate() {
+            *a = unsafe { _mm512_loadu_ps(s.add(at + b * stride + j * LANES)) };
+        }
+    }
+    let (x0, d0) = (xp.as_ptr(), dy_rows.as_ptr());
+    for oy in rows.clone() {
+        let (x_row, d_row) = (layout.origin(g, oy, 0), (oy - rows.start) * g.wo);
+        for ox in 0..g.wo {
+            let d = unsafe { d0.add((d_row + ox) * co_pad + v0 * LANES) };
+            let dv: [__m512; NV] =
+                std::array::from_fn(|j| unsafe { _mm512_loadu_ps(d.add(j * LANES)) });
+            for (b, row) in acc.iter_mut().enumerate() {
+                let xv = _mm512_set1_ps(unsafe { *x0.add(planes[b] + x_row + ox) });
+                for (a, dvj) in row.iter_mut().zip(&dv) {
+                    *a = _mm512_fmadd_ps(*dvj, xv, *a);
+                }
+            }
+        }
+    }
+    for (b, row) in acc.iter().enumerate() {
+        for (j, a) in row.iter().enumerate() {
+            unsafe { _mm512_storeu_ps(s.add(at + b * stride + j * LANES), *a) };
+        }
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+#[allow(clippy::too_many_arguments)]
+unsafe fn weight_tile<const NV: usize>(
+    _: &Geometry,
+    _: Padded,
+    _: &[f32],
+    _: [usize; WG_CHANNELS],
+    _: &[f32],
+    _: usize,
+    _: usize,
+    _: &std::ops::Range<usize>,
+    _: &mut [f32],
+    _: usize,
+    _: usize,
+) {
+    unreachable!("AVX-512 only: supports_weight_grad is false on this architecture")
+}
+
 #[cfg(test)]
 mod tests {
     use candle_core::{DType, Device, Result, Tensor};
 
     use super::*;
-    use crate::conv::{apply_input_grad, conv2d_reference};
+    use crate::conv::{apply_input_grad, apply_weight_grad, conv2d_reference};
     use crate::testing::max_abs_diff;
     use photomat_core::rng::pseudo_random;
 
@@ -391,8 +627,10 @@ mod tests {
     /// and several tiles, partial tiles (5 rows × 2 vectors = 10 vectors), partial channel
     /// blocks (C_out 7 and 13 against blocks of 6), 1×1, 3×3, 4×4 and 5×5 kernels, unpadded
     /// 3×3 convolutions whose forward (W 18 → 16) or input gradient (W 16) alone is direct,
-    /// and stride 2 on odd and even widths (the discriminator's 33 → 16 after its blur, the
-    /// estimator's padded 4×4), whose input gradients stay on im2col.
+    /// stride 2 on odd and even widths (the discriminator's 33 → 16 after its blur, the
+    /// estimator's padded 4×4), whose input gradients stay on im2col, and 70 and 40 output
+    /// channels (weight-gradient tiles of 4 + 1 and 3 vectors). Pointwise convolutions stay on
+    /// gemm, which reads their input in place.
     const CASES: &[Case] = &[
         (2, 5, 16, 16, 7, 3, 1, 1),
         (1, 3, 5, 32, 13, 3, 1, 1),
@@ -403,16 +641,18 @@ mod tests {
         (3, 2, 4, 16, 6, 3, 1, 1),
         (2, 3, 9, 33, 5, 3, 2, 0),
         (1, 4, 6, 32, 7, 4, 2, 1),
+        (1, 7, 4, 16, 70, 3, 1, 1),
+        (2, 2, 5, 16, 40, 3, 1, 1),
     ];
 
     #[test]
-    fn direct_conv_matches_the_f64_reference_and_its_input_gradient() -> Result<()> {
+    fn direct_conv_matches_the_f64_reference_and_its_gradients() -> Result<()> {
         if !has_avx512() {
             eprintln!("no AVX-512 on this CPU: the direct kernels are never used");
             return Ok(());
         }
         let dev = Device::Cpu;
-        let mut direct = (0, 0);
+        let mut direct = (0, 0, 0);
         for (seed, &(b, ci, h, w, co, k, stride, p)) in CASES.iter().enumerate() {
             for mode in [PaddingMode::Zeros, PaddingMode::Circular] {
                 let spec = Conv2dSpec {
@@ -427,6 +667,7 @@ mod tests {
                 let dy = pseudo_random(g.y_shape(), seed + 2, DType::F64, &dev)?;
                 let y_ref = conv2d_reference(&x, &wt, spec)?;
                 let dx_ref = apply_input_grad(g, &dy, &wt)?;
+                let dw_ref = apply_weight_grad(g, &x, &dy)?;
                 let f32s = |t: &Tensor| t.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>();
                 let (xv, wv, dyv) = (f32s(&x)?, f32s(&wt)?, f32s(&dy)?);
                 let case = format!("{mode:?} x{:?} co {co} k{k} s{stride} p{p}", (b, ci, h, w));
@@ -450,14 +691,24 @@ mod tests {
                         let err = max_abs_diff(&dx, &dx_ref)?;
                         assert!(err < tol, "input gradient {case} threads {threads}: {err}");
                     }
+                    if supports_weight_grad(&g) {
+                        direct.2 += 1;
+                        let mut dw = vec![f32::NAN; g.w_shape().elem_count()];
+                        weight_grad(&g, &xv, &dyv, &mut dw, threads);
+                        let dw = Tensor::from_vec(dw, g.w_shape(), &dev)?.to_dtype(DType::F64)?;
+                        let err = max_abs_diff(&dw, &dw_ref)?;
+                        // Sums over B·H_out·W_out ≤ 512 texels: rounding ≲ 512·6e-8 ≈ 3e-5.
+                        assert!(err < tol, "weight gradient {case} threads {threads}: {err}");
+                    }
                 }
             }
         }
-        // Of the 18 (case, mode) pairs, 16 forwards are direct (not the unpadded one at W 16,
-        // 14 output columns) and 11 input gradients (not the unpadded one at W 18, nor the
-        // unpadded circular 3×3, whose adjoint has another period, nor the strided ones), at
-        // 3 thread counts: the gates did not silently turn the kernels off.
-        assert_eq!(direct, (3 * 16, 3 * 11));
+        // Of the 22 (case, mode) pairs, 18 forwards are direct (not the pointwise one, left to
+        // gemm, nor the unpadded one at W 16, 14 output columns), 13 input gradients (nor the
+        // unpadded one at W 18, the unpadded circular 3×3, whose adjoint has another period,
+        // and the strided ones) and 20 weight gradients (all but the pointwise one), at 3
+        // thread counts: the gates did not silently turn the kernels off.
+        assert_eq!(direct, (3 * 18, 3 * 13, 3 * 20));
         Ok(())
     }
 
@@ -472,6 +723,13 @@ mod tests {
         assert!(!supports_forward(&narrow) && !supports_input_grad(&narrow));
         let wrapped = g((1, 2, 16, 16), (2, 2, 3, 3), Conv2dSpec::circular(1, 2))?;
         assert!(input_grad_geometry(&wrapped).is_none());
+        // Pointwise: gemm reads x in place, nothing to gain.
+        let pointwise = g((1, 2, 16, 16), (2, 2, 1, 1), Conv2dSpec::zeros(1, 0))?;
+        assert!(
+            !supports_forward(&pointwise)
+                && !supports_input_grad(&pointwise)
+                && !supports_weight_grad(&pointwise)
+        );
         Ok(())
     }
 }
