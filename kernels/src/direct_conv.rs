@@ -150,29 +150,41 @@ fn pack_weights(g: &Geometry, weight: impl Fn(usize, usize) -> f32) -> Vec<f32> 
     packed
 }
 
-/// Layout of the padded copy of one image: `Hp = H + 2p` rows per channel, each row the
-/// `s` phases of its `Wp = W + 2p` padded columns one after the other (column `j` at
-/// `(j mod s)·phase + j / s`), so that output texels `ox..ox+16` of a stride-`s` convolution
-/// read 16 consecutive floats for every tap.
+/// Bytes of the padded input copy one forward task holds: its band of output rows is as many
+/// rows as fit (at least [`MIN_BAND_ROWS`]), so that a 2048² sample needs no whole padded
+/// copy of each feature map beside the map itself.
+const PAD_BAND_BYTES: usize = 4 << 20;
+/// Fewest output rows per band: the `kh − 1` halo rows padded twice stay a small share.
+const MIN_BAND_ROWS: usize = 8;
+
+/// Layout of a padded copy of `rows` consecutive padded rows of one image (all `Hp = H + 2p`
+/// or a band of them): per channel, each row the `s` phases of its `Wp = W + 2p` padded
+/// columns one after the other (column `j` at `(j mod s)·phase + j / s`), so that output
+/// texels `ox..ox+16` of a stride-`s` convolution read 16 consecutive floats for every tap.
 #[derive(Clone, Copy)]
 struct Padded {
     /// Floats per phase: ⌈Wp / s⌉.
     phase: usize,
     /// Floats per padded row: `s · phase`.
     row: usize,
-    /// Floats per channel: `Hp · row`.
+    /// Padded rows held per channel.
+    rows: usize,
+    /// Floats per channel: `rows · row`.
     plane: usize,
 }
 
 impl Padded {
-    fn new(g: &Geometry) -> Self {
-        let (hp, wp) = (g.h + 2 * g.pad, g.w + 2 * g.pad);
+    /// The layout of padded rows enough for `out_rows` output rows.
+    fn new(g: &Geometry, out_rows: usize) -> Self {
+        let wp = g.w + 2 * g.pad;
         let phase = wp.div_ceil(g.stride);
         let row = g.stride * phase;
+        let rows = (out_rows - 1) * g.stride + g.kh;
         Self {
             phase,
             row,
-            plane: hp * row,
+            rows,
+            plane: rows * row,
         }
     }
 
@@ -182,22 +194,28 @@ impl Padded {
         ky * self.row + (kx % g.stride) * self.phase + kx / g.stride
     }
 
-    /// Offset of the padded texel tap (0, 0) reads for output texel (oy, ox).
+    /// Offset of the padded texel tap (0, 0) reads for output texel (oy, ox), `oy` counted from
+    /// the first output row of the copy.
     fn origin(&self, g: &Geometry, oy: usize, ox: usize) -> usize {
         g.stride * oy * self.row + ox
     }
 }
 
-/// Copies image `x` (C_in·H·W) into `xp` (C_in·[`Padded::plane`]), padded by zeros or
-/// wrapped. Floats of a row past its `Wp` columns (the last phase's tail) are left as they are.
-fn pad_image(g: &Geometry, layout: Padded, x: &[f32], xp: &mut [f32]) {
-    let (hp, wp, p, s) = (g.h + 2 * g.pad, g.w + 2 * g.pad, g.pad, g.stride);
+/// Copies padded rows `rows` (at most [`Padded::rows`] of them) of image `x` (C_in·H·W) into
+/// `xp` (C_in·[`Padded::plane`]), padded by zeros or wrapped. Floats of a row past its `Wp`
+/// columns (the last phase's tail) are left as they are.
+fn pad_rows(g: &Geometry, layout: Padded, x: &[f32], rows: std::ops::Range<usize>, xp: &mut [f32]) {
+    assert!(
+        rows.len() <= layout.rows,
+        "direct conv: band of {rows:?} too tall"
+    );
+    let (wp, p, s) = (g.w + 2 * g.pad, g.pad, g.stride);
     let cols: Vec<Option<usize>> = (0..wp).map(|j| g.source_index(j, p, g.w)).collect();
     for c in 0..g.ci {
         let plane = &x[c * g.h * g.w..(c + 1) * g.h * g.w];
-        for r in 0..hp {
+        for (r, padded) in rows.clone().enumerate() {
             let dst = &mut xp[c * layout.plane + r * layout.row..][..layout.row];
-            match g.source_index(r, p, g.h) {
+            match g.source_index(padded, p, g.h) {
                 None => dst.fill(0.0),
                 Some(iy) => {
                     let src = &plane[iy * g.w..(iy + 1) * g.w];
@@ -217,98 +235,113 @@ fn pad_image(g: &Geometry, layout: Padded, x: &[f32], xp: &mut [f32]) {
     }
 }
 
-/// Runs the tiles of every image: images in parallel when there are at least as many as
-/// threads, else bands of tiles of one image at a time.
+/// Runs the forward tiles of every image, band of output rows by band of output rows: the
+/// (image, band) pairs are the parallel tasks, each padding the input rows its band reads
+/// into its own buffer. Bands hold [`PAD_BAND_BYTES`] of padded input, and are cut finer when
+/// there are fewer images than threads, so that every thread has work.
 fn run(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], threads: usize) {
-    let (x_len, y_len) = (g.ci * g.h * g.w, g.co * g.ho * g.wo);
-    let layout = Padded::new(g);
-    let xp_len = g.ci * layout.plane;
-    let vectors = g.ho * g.wo / LANES;
-    let tiles = vectors.div_ceil(TILE_VECTORS);
-    if threads <= 1 || g.b >= threads {
-        let per = g.b.div_ceil(threads.max(1));
-        y.par_chunks_mut(per * y_len)
-            .zip(x.par_chunks(per * x_len))
-            .for_each(|(ys, xs)| {
-                let mut xp = vec![0.0; xp_len];
-                for (yi, xi) in ys.chunks_exact_mut(y_len).zip(xs.chunks_exact(x_len)) {
-                    pad_image(g, layout, xi, &mut xp);
-                    let y_addr = yi.as_mut_ptr() as usize;
-                    // SAFETY: one task writes all of image yi.
-                    unsafe { run_tiles(g, &xp, packed, y_addr, 0..tiles) };
-                }
-            });
-        return;
+    // Padded input bytes per output row: `s` padded rows of every channel.
+    let row_bytes = 4 * g.ci * g.stride * Padded::new(g, 1).row;
+    let mut band = (PAD_BAND_BYTES / row_bytes.max(1)).max(MIN_BAND_ROWS);
+    if threads > 1 && g.b < threads {
+        band = band.min(g.ho.div_ceil(2 * threads));
     }
-    let bands = (2 * threads).min(tiles);
-    let per = tiles.div_ceil(bands);
-    let mut xp = vec![0.0; xp_len];
-    for (yi, xi) in y.chunks_exact_mut(y_len).zip(x.chunks_exact(x_len)) {
-        pad_image(g, layout, xi, &mut xp);
-        let y_addr = yi.as_mut_ptr() as usize;
-        (0..tiles.div_ceil(per)).into_par_iter().for_each(|band| {
-            let range = band * per..((band + 1) * per).min(tiles);
-            // SAFETY: bands write disjoint tiles of image yi, which outlives them.
-            unsafe { run_tiles(g, &xp, packed, y_addr, range) };
-        });
-    }
+    run_in_bands(g, x, packed, y, band.clamp(1, g.ho));
 }
 
-/// Computes tiles `range` (groups of [`TILE_VECTORS`] output vectors in row-major order) of
-/// every output channel of one image from its padded copy `xp`.
+/// [`run`] with bands of `band` output rows (the last one shorter when they do not divide
+/// `H_out`).
+fn run_in_bands(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], band: usize) {
+    let (x_len, y_len) = (g.ci * g.h * g.w, g.co * g.ho * g.wo);
+    let layout = Padded::new(g, band);
+    let bands = g.ho.div_ceil(band);
+    let y_addr = y.as_mut_ptr() as usize;
+    (0..g.b * bands).into_par_iter().for_each_init(
+        || vec![0.0; g.ci * layout.plane],
+        |xp, job| {
+            let (i, r0) = (job / bands, (job % bands) * band);
+            let r1 = (r0 + band).min(g.ho);
+            // The last band may read fewer rows: pad only those.
+            let read = (r1 - r0 - 1) * g.stride + g.kh;
+            pad_rows(
+                g,
+                layout,
+                &x[i * x_len..(i + 1) * x_len],
+                r0 * g.stride..r0 * g.stride + read,
+                xp,
+            );
+            let yi = (y_addr as *mut f32).wrapping_add(i * y_len) as usize;
+            // SAFETY: `y` outlives the tasks; task (i, band) writes only output rows r0..r1
+            // of image i, which no other task writes.
+            unsafe { run_tiles(g, layout, xp, packed, yi, r0..r1) };
+        },
+    );
+}
+
+/// Computes output rows `rows` of every output channel of one image from `xp`, the padded
+/// copy (layout `layout`) of the input rows they read, in tiles of [`TILE_VECTORS`] output
+/// vectors in row-major order.
 ///
 /// # Safety
-/// `y_addr` points to the image's C_out·H_out·W_out outputs; no other thread writes the
-/// elements of these tiles while this runs.
+/// `y_addr` is the address of the image's C_out·H_out·W_out outputs; no other thread writes
+/// these rows while this runs.
 unsafe fn run_tiles(
     g: &Geometry,
+    layout: Padded,
     xp: &[f32],
     packed: &[f32],
     y_addr: usize,
-    range: std::ops::Range<usize>,
+    rows: std::ops::Range<usize>,
 ) {
-    let layout = Padded::new(g);
-    let plane_in = layout.plane;
     let plane_out = g.ho * g.wo;
-    let vectors = plane_out / LANES;
+    let (first, vectors) = (rows.start * g.wo / LANES, rows.len() * g.wo / LANES);
     let taps: Vec<usize> = (0..g.kh)
         .flat_map(|ky| (0..g.kw).map(move |kx| layout.tap(g, ky, kx)))
         .collect();
     let k = g.k();
-    // (input offset, output offset) of output vector v.
+    // (input offset in `xp`, output offset in a plane) of the band's output vector v.
     let at = |v: usize| {
         let (oy, ox) = ((v * LANES) / g.wo, (v * LANES) % g.wo);
-        (layout.origin(g, oy, ox), oy * g.wo + ox)
+        (layout.origin(g, oy, ox), (first * LANES) + oy * g.wo + ox)
     };
     let y = y_addr as *mut f32;
-    for t in range {
-        let first = t * TILE_VECTORS;
-        let count = TILE_VECTORS.min(vectors - first);
+    for t in (0..vectors).step_by(TILE_VECTORS) {
+        let count = TILE_VECTORS.min(vectors - t);
         for b in 0..g.co.div_ceil(OC_BLOCK) {
             let wb = &packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
-            let rows = OC_BLOCK.min(g.co - b * OC_BLOCK);
+            let channels = OC_BLOCK.min(g.co - b * OC_BLOCK);
+            // SAFETY: block b's first channel plane lies inside the image's outputs.
             let y_block = unsafe { y.add(b * OC_BLOCK * plane_out) };
             if count == TILE_VECTORS {
                 let mut ins = [0; TILE_VECTORS];
                 let mut outs = [0; TILE_VECTORS];
                 for j in 0..TILE_VECTORS {
-                    (ins[j], outs[j]) = at(first + j);
+                    (ins[j], outs[j]) = at(t + j);
                 }
                 // SAFETY: AVX-512F was detected (`supports_forward`); loads stay inside
                 // `xp` (offset + tap + 16 ≤ padded plane), stores inside the tile's outputs.
                 unsafe {
                     tile::<TILE_VECTORS>(
-                        xp, plane_in, g.ci, &taps, ins, wb, y_block, plane_out, outs, rows,
+                        xp,
+                        layout.plane,
+                        g.ci,
+                        &taps,
+                        ins,
+                        wb,
+                        y_block,
+                        plane_out,
+                        outs,
+                        channels,
                     )
                 };
             } else {
-                for j in first..first + count {
+                for j in t..t + count {
                     let (i, o) = at(j);
                     // SAFETY: as above, one vector.
                     unsafe {
                         tile::<1>(
                             xp,
-                            plane_in,
+                            layout.plane,
                             g.ci,
                             &taps,
                             [i],
@@ -316,7 +349,7 @@ unsafe fn run_tiles(
                             y_block,
                             plane_out,
                             [o],
-                            rows,
+                            channels,
                         )
                     };
                 }
@@ -438,7 +471,7 @@ pub(crate) fn weight_grad(g: &Geometry, x: &[f32], dy: &[f32], dw: &mut [f32], t
             })
             .collect()
     };
-    let layout = Padded::new(g);
+    let layout = Padded::new(g, g.ho);
     let taps = g.kh * g.kw;
     let ci_pad = g.ci.next_multiple_of(WG_CHANNELS);
     let partials: Vec<Vec<f32>> = tasks
@@ -449,7 +482,8 @@ pub(crate) fn weight_grad(g: &Geometry, x: &[f32], dy: &[f32], dw: &mut [f32], t
             let mut xp = vec![0.0; g.ci * layout.plane];
             let mut dy_rows = vec![0.0; band * g.wo * co_pad];
             for i in first..first + count {
-                pad_image(g, layout, &x[i * x_len..(i + 1) * x_len], &mut xp);
+                let xi = &x[i * x_len..(i + 1) * x_len];
+                pad_rows(g, layout, xi, 0..layout.rows, &mut xp);
                 let dyi = &dy[i * y_len..(i + 1) * y_len];
                 for j in bands.clone() {
                     let rows = j * band..((j + 1) * band).min(g.ho);
@@ -709,6 +743,41 @@ mod tests {
         // and the strided ones) and 20 weight gradients (all but the pointwise one), at 3
         // thread counts: the gates did not silently turn the kernels off.
         assert_eq!(direct, (3 * 18, 3 * 13, 3 * 20));
+        Ok(())
+    }
+
+    #[test]
+    fn direct_forward_in_bands_of_rows_equals_the_whole_image() -> Result<()> {
+        // 16 output rows in bands of 3 (the last of 1), stride 1 and 2: each band pads its own
+        // halo rows, zero or wrapped, and writes only its rows.
+        let dev = Device::Cpu;
+        for (stride, pad, w) in [(1, 1, 16), (2, 1, 32)] {
+            for mode in [PaddingMode::Zeros, PaddingMode::Circular] {
+                let spec = Conv2dSpec {
+                    stride,
+                    padding: pad,
+                    mode,
+                };
+                let x = pseudo_random((2, 3, 16 * stride, w), 11, DType::F32, &dev)?;
+                let wt = pseudo_random((5, 3, 3, 3), 12, DType::F32, &dev)?;
+                let g = Geometry::new(x.dims4()?, wt.dims4()?, spec)?;
+                assert_eq!(g.ho, 16);
+                let (xv, wv) = (
+                    x.flatten_all()?.to_vec1::<f32>()?,
+                    wt.flatten_all()?.to_vec1::<f32>()?,
+                );
+                let packed = pack_weights(&g, |o, k| wv[o * g.k() + k]);
+                let mut whole = vec![f32::NAN; g.y_shape().elem_count()];
+                run_in_bands(&g, &xv, &packed, &mut whole, 16);
+                let mut banded = vec![f32::NAN; g.y_shape().elem_count()];
+                run_in_bands(&g, &xv, &packed, &mut banded, 3);
+                // Same sums in the same order: equal to the bit.
+                assert_eq!(whole, banded, "{spec:?}");
+                let reference = conv2d_reference(&x, &wt, spec)?;
+                let banded = Tensor::from_vec(banded, g.y_shape(), &dev)?;
+                assert!(max_abs_diff(&banded, &reference)? < 1e-4, "{spec:?}");
+            }
+        }
         Ok(())
     }
 
