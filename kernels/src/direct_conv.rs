@@ -203,7 +203,7 @@ impl Padded {
 
 /// Copies padded rows `rows` (at most [`Padded::rows`] of them) of image `x` (C_in·H·W) into
 /// `xp` (C_in·[`Padded::plane`]), padded by zeros or wrapped. Floats of a row past its `Wp`
-/// columns (the last phase's tail) are left as they are.
+/// columns (the last phase's tail) are zeros.
 fn pad_rows(g: &Geometry, layout: Padded, x: &[f32], rows: std::ops::Range<usize>, xp: &mut [f32]) {
     assert!(
         rows.len() <= layout.rows,
@@ -225,8 +225,26 @@ fn pad_rows(g: &Geometry, layout: Padded, x: &[f32], rows: std::ops::Range<usize
                             dst[j] = cols[j].map_or(0.0, |ix| src[ix]);
                         }
                     } else {
-                        for (j, col) in cols.iter().enumerate() {
-                            dst[(j % s) * layout.phase + j / s] = col.map_or(0.0, |ix| src[ix]);
+                        // Phase by phase: the interior columns of a phase are every s-th texel
+                        // of the source row, the rest wrapped or zero.
+                        for q in 0..s {
+                            let out = &mut dst[q * layout.phase..(q + 1) * layout.phase];
+                            // Interior: p ≤ t·s + q < p + W.
+                            let lo = p.saturating_sub(q).div_ceil(s).min(out.len());
+                            let hi = (p + g.w).saturating_sub(q).div_ceil(s).clamp(lo, out.len());
+                            if lo < hi {
+                                let first = lo * s + q - p;
+                                let inner = src[first..].iter().step_by(s);
+                                for (o, v) in out[lo..hi].iter_mut().zip(inner) {
+                                    *o = *v;
+                                }
+                            }
+                            for t in (0..lo).chain(hi..out.len()) {
+                                out[t] = match cols.get(t * s + q) {
+                                    Some(&Some(ix)) => src[ix],
+                                    _ => 0.0,
+                                };
+                            }
                         }
                     }
                 }
@@ -441,13 +459,15 @@ pub(crate) fn supports_weight_grad(g: &Geometry) -> bool {
 /// dW[o, c, ky, kx] = Σ_b Σ_(oy, ox) dy[b, o, oy, ox] · xpad[b, c, s·oy + ky, s·ox + kx]
 /// ```
 ///
-/// with the 16 lanes of a vector over output channels: `dy` is copied channels-last once per
-/// image (row `(oy, ox)` of C_out floats, padded to whole vectors), and a tile of
-/// [`WG_VECTORS`] × 16 output channels × [`WG_CHANNELS`] input channels of one tap adds
-/// `dy` row × broadcast input texel over a band of output rows, its sums kept in a
-/// channels-last gradient buffer between bands. Requires [`supports_weight_grad`]. Tasks
-/// (ranges of images, or of one image's bands when there are fewer images than threads) sum
-/// into their own buffers, added in task order, so the result does not depend on timing.
+/// with the 16 lanes of a vector over output channels: `dy` is copied channels-last one
+/// L1-sized band of output rows at a time (row `(oy, ox)` of C_out floats, padded to whole
+/// vectors), and a tile of [`WG_VECTORS`] × 16 output channels × [`WG_CHANNELS`] input
+/// channels of one tap adds `dy` row × broadcast input texel over the band, its sums kept in
+/// a channels-last gradient buffer between bands. Each task pads whole input images (weight
+/// gradients run in training, on images of at most 256² here). Requires
+/// [`supports_weight_grad`]. Tasks (ranges of images, or of one image's bands when there are
+/// fewer images than threads) sum into their own buffers, added in task order, so the result
+/// does not depend on thread timing.
 pub(crate) fn weight_grad(g: &Geometry, x: &[f32], dy: &[f32], dw: &mut [f32], threads: usize) {
     assert!(supports_weight_grad(g), "direct conv: unsupported geometry");
     let (x_len, y_len) = (g.ci * g.h * g.w, g.co * g.ho * g.wo);
