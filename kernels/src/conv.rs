@@ -662,7 +662,7 @@ fn input_grad_into<T: WithDType>(g: &Geometry, dy: &[T], w: &[T], dx: &mut [T], 
 
 /// Weight gradient: writes every element of `dw` (C_out·C_in·kh·kw) from `x` and `dy`.
 fn weight_grad_into<T: WithDType>(g: &Geometry, x: &[T], dy: &[T], dw: &mut [T], threads: usize) {
-    if let Some((x, dy, dw)) = as_f32(x, dy, dw).filter(|_| direct_conv::supports_weight_grad(g)) {
+    if let Some((x, dy, dw)) = as_f32(x, dy, dw).filter(|_| direct_conv::prefers_weight_grad(g)) {
         direct_conv::weight_grad(g, x, dy, dw, threads);
         return;
     }

@@ -446,10 +446,22 @@ const WG_VECTORS: usize = 4;
 /// that the band stays in L1 while every (tap, input channel) tile sweeps it.
 const WG_BAND_BYTES: usize = 32 << 10;
 
+/// Fewest output texels (over the batch) for the direct weight gradient: below, its fixed
+/// costs per weight (the channels-last sums, zeroed, then transposed back) outweigh the
+/// `2·texels` FLOP each weight takes, and im2col + `gemm` writes the weights in place (the
+/// estimator's 4² and 8² layers; `docs/benchmarks.md`, "A direct convolution kernel").
+const WG_MIN_TEXELS: usize = 1024;
+
 /// Whether [`weight_grad`] computes this convolution's weight gradient: every f32 geometry
 /// but a pointwise one, on AVX-512.
 pub(crate) fn supports_weight_grad(g: &Geometry) -> bool {
     !g.is_pointwise() && has_avx512()
+}
+
+/// Whether [`weight_grad`] is the faster way: [`supports_weight_grad`] with at least
+/// [`WG_MIN_TEXELS`] output texels.
+pub(crate) fn prefers_weight_grad(g: &Geometry) -> bool {
+    supports_weight_grad(g) && g.b * g.ho * g.wo >= WG_MIN_TEXELS
 }
 
 /// Weight gradient: writes every element of `dw` (C_out·C_in·kh·kw) from `x` (B·C_in·H·W)
