@@ -61,9 +61,10 @@ fn has_avx512() -> bool {
     }
 }
 
-/// Whether [`forward`] computes this convolution: stride 1, output rows of whole vectors.
+/// Whether [`forward`] computes this convolution: any but a pointwise one with output rows of
+/// at least one vector (a row's last, partial vector is masked).
 pub(crate) fn supports_forward(g: &Geometry) -> bool {
-    !g.is_pointwise() && g.wo.is_multiple_of(LANES) && has_avx512()
+    !g.is_pointwise() && g.wo >= LANES && has_avx512()
 }
 
 /// The forward convolution whose value is the input gradient of `g`, with its
@@ -74,7 +75,7 @@ pub(crate) fn input_grad_geometry(g: &Geometry) -> Option<Geometry> {
         || g.stride != 1
         || g.pad >= g.kh
         || g.pad >= g.kw
-        || !g.w.is_multiple_of(LANES)
+        || g.w < LANES
         || !has_avx512()
     {
         return None;
@@ -312,32 +313,35 @@ unsafe fn run_tiles(
     rows: std::ops::Range<usize>,
 ) {
     let plane_out = g.ho * g.wo;
-    let (first, vectors) = (rows.start * g.wo / LANES, rows.len() * g.wo / LANES);
+    // Whole vectors per output row, and the lanes of the row's last, partial one.
+    let (whole, tail) = (g.wo / LANES, g.wo % LANES);
     let taps: Vec<usize> = (0..g.kh)
         .flat_map(|ky| (0..g.kw).map(move |kx| layout.tap(g, ky, kx)))
         .collect();
     let k = g.k();
-    // (input offset in `xp`, output offset in a plane) of the band's output vector v.
-    let at = |v: usize| {
-        let (oy, ox) = ((v * LANES) / g.wo, (v * LANES) % g.wo);
-        (layout.origin(g, oy, ox), (first * LANES) + oy * g.wo + ox)
-    };
+    // (input offset in `xp`, output offset in a plane) of output texel (oy, ox), oy counted
+    // from the band's first row.
+    let at = |oy: usize, ox: usize| (layout.origin(g, oy, ox), (rows.start + oy) * g.wo + ox);
+    // The band's whole vectors in row-major order.
+    let vectors = rows.len() * whole;
+    let whole_at = |v: usize| at(v / whole.max(1), (v % whole.max(1)) * LANES);
     let y = y_addr as *mut f32;
-    for t in (0..vectors).step_by(TILE_VECTORS) {
-        let count = TILE_VECTORS.min(vectors - t);
-        for b in 0..g.co.div_ceil(OC_BLOCK) {
-            let wb = &packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
-            let channels = OC_BLOCK.min(g.co - b * OC_BLOCK);
-            // SAFETY: block b's first channel plane lies inside the image's outputs.
-            let y_block = unsafe { y.add(b * OC_BLOCK * plane_out) };
+    for b in 0..g.co.div_ceil(OC_BLOCK) {
+        let wb = &packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
+        let channels = OC_BLOCK.min(g.co - b * OC_BLOCK);
+        // SAFETY: block b's first channel plane lies inside the image's outputs.
+        let y_block = unsafe { y.add(b * OC_BLOCK * plane_out) };
+        let full = u16::MAX;
+        for t in (0..vectors).step_by(TILE_VECTORS) {
+            let count = TILE_VECTORS.min(vectors - t);
             if count == TILE_VECTORS {
                 let mut ins = [0; TILE_VECTORS];
                 let mut outs = [0; TILE_VECTORS];
                 for j in 0..TILE_VECTORS {
-                    (ins[j], outs[j]) = at(t + j);
+                    (ins[j], outs[j]) = whole_at(t + j);
                 }
                 // SAFETY: AVX-512F was detected (`supports_forward`); loads stay inside
-                // `xp` (offset + tap + 16 ≤ padded plane), stores inside the tile's outputs.
+                // `xp` (offset + tap + 16 ≤ padded row), stores inside the tile's outputs.
                 unsafe {
                     tile::<TILE_VECTORS>(
                         xp,
@@ -346,15 +350,15 @@ unsafe fn run_tiles(
                         &taps,
                         ins,
                         wb,
-                        y_block,
-                        plane_out,
+                        (y_block, plane_out),
                         outs,
+                        [full; TILE_VECTORS],
                         channels,
                     )
                 };
             } else {
                 for j in t..t + count {
-                    let (i, o) = at(j);
+                    let (i, o) = whole_at(j);
                     // SAFETY: as above, one vector.
                     unsafe {
                         tile::<1>(
@@ -364,20 +368,43 @@ unsafe fn run_tiles(
                             &taps,
                             [i],
                             wb,
-                            y_block,
-                            plane_out,
+                            (y_block, plane_out),
                             [o],
+                            [full],
                             channels,
                         )
                     };
                 }
             }
         }
+        if tail > 0 {
+            let mask = (1u16 << tail) - 1;
+            for oy in 0..rows.len() {
+                let (i, o) = at(oy, whole * LANES);
+                // SAFETY: as above; the masked lanes past the row's end are neither read nor
+                // written.
+                unsafe {
+                    tile::<1>(
+                        xp,
+                        layout.plane,
+                        g.ci,
+                        &taps,
+                        [i],
+                        wb,
+                        (y_block, plane_out),
+                        [o],
+                        [mask],
+                        channels,
+                    )
+                };
+            }
+        }
     }
 }
 
 /// One register tile: `rows` (≤ [`OC_BLOCK`]) output channels × `NV` vectors, summed over
-/// `ci` channels and the taps, stored at `y + o·plane_out + outs[j]`.
+/// `ci` channels and the taps, stored at `y.0 + o·y.1 + outs[j]`. Vector `j` reads and writes
+/// only the lanes of `masks[j]` (all 16 but in a row's last, partial vector).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 #[allow(clippy::too_many_arguments)]
@@ -388,21 +415,27 @@ unsafe fn tile<const NV: usize>(
     taps: &[usize],
     ins: [usize; NV],
     wb: &[f32],
-    y: *mut f32,
-    plane_out: usize,
+    (y, plane_out): (*mut f32, usize),
     outs: [usize; NV],
+    masks: [u16; NV],
     rows: usize,
 ) {
     use std::arch::x86_64::*;
     let mut acc = [[_mm512_setzero_ps(); NV]; OC_BLOCK];
     let mut w = wb.as_ptr();
     let x0 = xp.as_ptr();
+    let partial = masks.iter().any(|&m| m != u16::MAX);
     for c in 0..ci {
         let xc = unsafe { x0.add(c * plane_in) };
         for &t in taps {
             let mut xv = [_mm512_setzero_ps(); NV];
             for j in 0..NV {
-                xv[j] = unsafe { _mm512_loadu_ps(xc.add(ins[j] + t)) };
+                let at = unsafe { xc.add(ins[j] + t) };
+                xv[j] = if partial {
+                    unsafe { _mm512_maskz_loadu_ps(masks[j], at) }
+                } else {
+                    unsafe { _mm512_loadu_ps(at) }
+                };
             }
             for (o, row) in acc.iter_mut().enumerate() {
                 let wv = _mm512_set1_ps(unsafe { *w.add(o) });
@@ -415,7 +448,7 @@ unsafe fn tile<const NV: usize>(
     }
     for (o, row) in acc.iter().enumerate().take(rows) {
         for j in 0..NV {
-            unsafe { _mm512_storeu_ps(y.add(o * plane_out + outs[j]), row[j]) };
+            unsafe { _mm512_mask_storeu_ps(y.add(o * plane_out + outs[j]), masks[j], row[j]) };
         }
     }
 }
@@ -429,9 +462,9 @@ unsafe fn tile<const NV: usize>(
     _: &[usize],
     _: [usize; NV],
     _: &[f32],
-    _: *mut f32,
-    _: usize,
+    _: (*mut f32, usize),
     _: [usize; NV],
+    _: [u16; NV],
     _: usize,
 ) {
     unreachable!("AVX-512 only: supports_forward is false on this architecture")
@@ -695,7 +728,8 @@ mod tests {
     /// 3×3 convolutions whose forward (W 18 → 16) or input gradient (W 16) alone is direct,
     /// stride 2 on odd and even widths (the discriminator's 33 → 16 after its blur, the
     /// estimator's padded 4×4), whose input gradients stay on im2col, and 70 and 40 output
-    /// channels (weight-gradient tiles of 4 + 1 and 3 vectors). Pointwise convolutions stay on
+    /// channels (weight-gradient tiles of 4 + 1 and 3 vectors), and rows ending in a partial,
+    /// masked vector (20, 33 and strided 33 output columns). Pointwise convolutions stay on
     /// gemm, which reads their input in place.
     const CASES: &[Case] = &[
         (2, 5, 16, 16, 7, 3, 1, 1),
@@ -709,6 +743,9 @@ mod tests {
         (1, 4, 6, 32, 7, 4, 2, 1),
         (1, 7, 4, 16, 70, 3, 1, 1),
         (2, 2, 5, 16, 40, 3, 1, 1),
+        (1, 3, 5, 20, 7, 3, 1, 1),
+        (2, 2, 4, 33, 5, 3, 1, 1),
+        (1, 3, 9, 67, 6, 3, 2, 0),
     ];
 
     #[test]
@@ -769,12 +806,12 @@ mod tests {
                 }
             }
         }
-        // Of the 22 (case, mode) pairs, 18 forwards are direct (not the pointwise one, left to
-        // gemm, nor the unpadded one at W 16, 14 output columns), 13 input gradients (nor the
-        // unpadded one at W 18, the unpadded circular 3×3, whose adjoint has another period,
-        // and the strided ones) and 20 weight gradients (all but the pointwise one), at 3
+        // Of the 28 (case, mode) pairs, 24 forwards are direct (not the pointwise one, left to
+        // gemm, nor the unpadded one at W 16, 14 output columns: narrower than a vector), 18
+        // input gradients (nor the unpadded circular 3×3s, whose adjoint has another period,
+        // nor the strided ones) and 26 weight gradients (all but the pointwise one), at 3
         // thread counts: the gates did not silently turn the kernels off.
-        assert_eq!(direct, (3 * 18, 3 * 13, 3 * 20));
+        assert_eq!(direct, (3 * 24, 3 * 18, 3 * 26));
         Ok(())
     }
 
