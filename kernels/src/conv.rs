@@ -27,9 +27,9 @@
 //! On CPUs with AVX-512, f32 convolutions other than pointwise ones run on the direct kernels
 //! of [`crate::direct_conv`] instead, which read a padded copy of the input in place rather
 //! than `col(x)` (`docs/benchmarks.md`, "A direct convolution kernel"): forwards whose output
-//! width is a multiple of 16, the input gradients of such stride-1 convolutions, and every
-//! weight gradient. Pointwise convolutions (whose `col(x)` is `x` itself), strided input
-//! gradients, narrow layers and f64 stay here.
+//! rows are at least 16 texels wide, the input gradients of such stride-1 convolutions, and
+//! weight gradients over at least 1024 output texels. Pointwise convolutions (whose `col(x)`
+//! is `x` itself), strided input gradients, narrow layers and f64 stay here.
 //!
 //! CPU tensors of dtype f32 and f64 take this path; other devices and dtypes fall back to
 //! [`conv2d_reference`] (candle's `conv2d`, circular padding by `narrow` + `cat`), as does
