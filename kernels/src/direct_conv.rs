@@ -727,15 +727,20 @@ mod tests {
     /// (B, C_in, H, W, C_out, k, stride, padding).
     type Case = (usize, usize, usize, usize, usize, usize, usize, usize);
 
-    /// Widths of whole vectors (16, 32) with one
-    /// and several tiles, partial tiles (5 rows × 2 vectors = 10 vectors), partial channel
-    /// blocks (C_out 7 and 13 against blocks of 6), 1×1, 3×3, 4×4 and 5×5 kernels, unpadded
-    /// 3×3 convolutions whose forward (W 18 → 16) or input gradient (W 16) alone is direct,
-    /// stride 2 on odd and even widths (the discriminator's 33 → 16 after its blur, the
-    /// estimator's padded 4×4), whose input gradients stay on im2col, and 70 and 40 output
-    /// channels (weight-gradient tiles of 4 + 1 and 3 vectors), and rows ending in a partial,
-    /// masked vector (20, 33 and strided 33 output columns), and 24 output channels at 24 × 32
-    /// texels (2-vector weight-gradient tiles over three L1 bands, split between tasks).
+    /// The paths and edges of the kernels:
+    /// - widths of whole vectors (16, 32) with one and several tiles, and partial tiles (5 rows
+    ///   × 2 vectors = 10 vectors);
+    /// - partial output-channel blocks (C_out 7 and 13 against blocks of 6);
+    /// - 1×1, 3×3, 4×4 and 5×5 kernels;
+    /// - unpadded 3×3 convolutions whose forward (W 18 → 16) or input gradient (W 16) alone is
+    ///   direct;
+    /// - stride 2 on odd and even widths (the discriminator's 33 → 16 after its blur, the
+    ///   estimator's padded 4×4), whose input gradients stay on im2col;
+    /// - 70 and 40 output channels (weight-gradient tiles of 4 + 1 and 3 vectors);
+    /// - rows ending in a partial, masked vector (20, 33 and strided 33 output columns);
+    /// - 24 output channels at 24 × 32 texels (2-vector weight-gradient tiles over three L1
+    ///   bands, split between tasks).
+    ///
     /// Pointwise convolutions stay on gemm, which reads their input in place.
     const CASES: &[Case] = &[
         (2, 5, 16, 16, 7, 3, 1, 1),
@@ -783,32 +788,33 @@ mod tests {
                 let case = format!("{mode:?} x{:?} co {co} k{k} s{stride} p{p}", (b, ci, h, w));
                 // f32 sums of ≤ 70·9 = 630 products of values in [−1, 1]: rounding ≲ 630·6e-8;
                 // a wrong tap or channel is off by O(0.1).
+                // Weight gradients sum over B·H_out·W_out ≤ 768 texels: rounding ≲ 5e-5.
                 let tol = 1e-4;
                 for threads in [1, 2, 3] {
+                    // Runs one kernel into a NaN-filled buffer (an unwritten output stays NaN
+                    // and fails the comparison) and compares it with the f64 reference.
+                    let check = |what: &str, reference: &Tensor, run: &dyn Fn(&mut [f32])| {
+                        let mut out = vec![f32::NAN; reference.elem_count()];
+                        run(&mut out);
+                        let out =
+                            Tensor::from_vec(out, reference.shape(), &dev)?.to_dtype(DType::F64)?;
+                        let err = max_abs_diff(&out, reference)?;
+                        assert!(err < tol, "{what} {case} threads {threads}: {err}");
+                        Result::Ok(())
+                    };
                     if supports_forward(&g) {
                         direct.0 += 1;
-                        let mut y = vec![f32::NAN; g.y_shape().elem_count()];
-                        forward(&g, &xv, &wv, &mut y, threads);
-                        let y = Tensor::from_vec(y, g.y_shape(), &dev)?.to_dtype(DType::F64)?;
-                        let err = max_abs_diff(&y, &y_ref)?;
-                        assert!(err < tol, "forward {case} threads {threads}: {err}");
+                        check("forward", &y_ref, &|y| forward(&g, &xv, &wv, y, threads))?;
                     }
                     if supports_input_grad(&g) {
                         direct.1 += 1;
-                        let mut dx = vec![f32::NAN; g.x_shape().elem_count()];
-                        input_grad(&g, &dyv, &wv, &mut dx, threads);
-                        let dx = Tensor::from_vec(dx, g.x_shape(), &dev)?.to_dtype(DType::F64)?;
-                        let err = max_abs_diff(&dx, &dx_ref)?;
-                        assert!(err < tol, "input gradient {case} threads {threads}: {err}");
+                        let run = |dx: &mut [f32]| input_grad(&g, &dyv, &wv, dx, threads);
+                        check("input gradient", &dx_ref, &run)?;
                     }
                     if supports_weight_grad(&g) {
                         direct.2 += 1;
-                        let mut dw = vec![f32::NAN; g.w_shape().elem_count()];
-                        weight_grad(&g, &xv, &dyv, &mut dw, threads);
-                        let dw = Tensor::from_vec(dw, g.w_shape(), &dev)?.to_dtype(DType::F64)?;
-                        let err = max_abs_diff(&dw, &dw_ref)?;
-                        // Sums over B·H_out·W_out ≤ 512 texels: rounding ≲ 512·6e-8 ≈ 3e-5.
-                        assert!(err < tol, "weight gradient {case} threads {threads}: {err}");
+                        let run = |dw: &mut [f32]| weight_grad(&g, &xv, &dyv, dw, threads);
+                        check("weight gradient", &dw_ref, &run)?;
                     }
                 }
             }
