@@ -26,7 +26,9 @@
 //! **Input gradient.** That of a stride-1 convolution is itself such a convolution, of `dy`
 //! with the kernel flipped in both axes and its two channel axes swapped, padded by
 //! `k − 1 − p` (for circular padding only when `2p = k − 1`, where output and input planes
-//! have the same size and the wrap-around has the same period). Strided ones stay on col2im.
+//! have the same size and the wrap-around has the same period). Strided ones are `s²` such
+//! convolutions with sub-kernels, one per phase of the input grid
+//! ([`crate::strided_input_grad`]).
 //!
 //! **Weight gradient.** A reduction over texels: the 16 lanes run over output channels instead,
 //! `dy` copied channels-last one L1-sized band of rows at a time, and a tile of `WG_VECTORS`
@@ -41,9 +43,10 @@
 use rayon::prelude::*;
 
 use crate::conv::{Conv2dSpec, Geometry, PaddingMode};
+use crate::strided_input_grad;
 
 /// f32 lanes of one AVX-512 vector: output texels per accumulator.
-const LANES: usize = 16;
+pub(crate) const LANES: usize = 16;
 /// Output channels per register tile.
 const OC_BLOCK: usize = 6;
 /// Vectors of 16 output texels per register tile: `OC_BLOCK × TILE_VECTORS` = 24
@@ -51,7 +54,7 @@ const OC_BLOCK: usize = 6;
 const TILE_VECTORS: usize = 4;
 
 /// Whether this CPU has the AVX-512 foundation instructions the kernel uses.
-fn has_avx512() -> bool {
+pub(crate) fn has_avx512() -> bool {
     #[cfg(target_arch = "x86_64")]
     {
         std::arch::is_x86_feature_detected!("avx512f")
@@ -102,9 +105,10 @@ pub(crate) fn input_grad_geometry(g: &Geometry) -> Option<Geometry> {
     (adjoint.ho == g.h && adjoint.wo == g.w).then_some(adjoint)
 }
 
-/// Whether [`input_grad`] computes this convolution's input gradient.
+/// Whether [`input_grad`] computes this convolution's input gradient: stride 1 as the
+/// adjoint forward, larger strides phase by phase ([`crate::strided_input_grad`]).
 pub(crate) fn supports_input_grad(g: &Geometry) -> bool {
-    input_grad_geometry(g).is_some()
+    input_grad_geometry(g).is_some() || strided_input_grad::supports(g)
 }
 
 /// Forward convolution: writes every element of `y` (B·C_out·H_out·W_out) from `x`
@@ -114,39 +118,48 @@ pub(crate) fn forward(g: &Geometry, x: &[f32], w: &[f32], y: &mut [f32], threads
         supports_forward(g),
         "direct conv: unsupported geometry {g:?}"
     );
-    let packed = pack_weights(g, |o, k| w[o * g.k() + k]);
+    let packed = pack_weights(g.co, g.k(), |o, dst| {
+        dst.copy_from_slice(&w[o * g.k()..][..g.k()])
+    });
     run(g, x, &packed, y, threads);
 }
 
 /// Input gradient: writes every element of `dx` (B·C_in·H·W) from `dy` (B·C_out·H_out·W_out)
 /// and `w` (C_out·C_in·kh·kw), as the forward convolution of `dy` with the flipped,
-/// transposed kernel. Requires [`supports_input_grad`].
+/// transposed kernel (stride 1) or phase by phase (larger strides). Requires
+/// [`supports_input_grad`].
 pub(crate) fn input_grad(g: &Geometry, dy: &[f32], w: &[f32], dx: &mut [f32], threads: usize) {
+    if g.stride > 1 {
+        strided_input_grad::input_grad(g, dy, w, dx, threads);
+        return;
+    }
     let adjoint = input_grad_geometry(g).expect("direct conv: unsupported input gradient");
-    let (kh, kw, taps) = (g.kh, g.kw, g.kh * g.kw);
-    // Adjoint kernel [c][o][ky'][kx'] = W[o][c][kh−1−ky'][kw−1−kx'].
-    let packed = pack_weights(&adjoint, |c, k| {
-        let (o, tap) = (k / taps, k % taps);
-        let (ky, kx) = (tap / kw, tap % kw);
-        w[((o * g.ci + c) * kh + kh - 1 - ky) * kw + kw - 1 - kx]
+    let taps = g.kh * g.kw;
+    // Adjoint kernel [c][o][ky'][kx'] = W[o][c][kh−1−ky'][kw−1−kx']: each (o, c) kernel
+    // reversed.
+    let packed = pack_weights(adjoint.co, adjoint.k(), |c, dst| {
+        for (o, flipped) in dst.chunks_exact_mut(taps).enumerate() {
+            let kernel = &w[(o * g.ci + c) * taps..][..taps];
+            for (d, &v) in flipped.iter_mut().zip(kernel.iter().rev()) {
+                *d = v;
+            }
+        }
     });
     run(&adjoint, dy, &packed, dx, threads);
 }
 
 /// Weights in tile order: block `b` of [`OC_BLOCK`] output channels, then lowered row
-/// `k = (c·kh + ky)·kw + kx`, then the block's channels, zeros past `C_out`.
-/// `weight(o, k)` is element (o, k) of the C_out × K kernel matrix.
-fn pack_weights(g: &Geometry, weight: impl Fn(usize, usize) -> f32) -> Vec<f32> {
-    let (k, blocks) = (g.k(), g.co.div_ceil(OC_BLOCK));
-    let mut packed = vec![0.0; blocks * k * OC_BLOCK];
-    for (b, block) in packed.chunks_exact_mut(k * OC_BLOCK).enumerate() {
-        for (kk, row) in block.chunks_exact_mut(OC_BLOCK).enumerate() {
-            for (j, v) in row.iter_mut().enumerate() {
-                let o = b * OC_BLOCK + j;
-                if o < g.co {
-                    *v = weight(o, kk);
-                }
-            }
+/// `k = (c·kh + ky)·kw + kx`, then the block's channels, zeros past `co`.
+/// `row(o, dst)` writes row `o` (its `k` weights) of the `co × k` kernel matrix into `dst`.
+pub(crate) fn pack_weights(co: usize, k: usize, row: impl Fn(usize, &mut [f32])) -> Vec<f32> {
+    let mut packed = vec![0.0; co.div_ceil(OC_BLOCK) * k * OC_BLOCK];
+    let mut scratch = vec![0.0; k];
+    for o in 0..co {
+        row(o, &mut scratch);
+        let (b, j) = (o / OC_BLOCK, o % OC_BLOCK);
+        let block = &mut packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
+        for (dst, &v) in block[j..].iter_mut().step_by(OC_BLOCK).zip(&scratch) {
+            *dst = v;
         }
     }
     packed
@@ -155,9 +168,9 @@ fn pack_weights(g: &Geometry, weight: impl Fn(usize, usize) -> f32) -> Vec<f32> 
 /// Bytes of the padded input copy one forward task holds: its band of output rows is as many
 /// rows as fit (at least [`MIN_BAND_ROWS`]), so that a 2048² sample needs no whole padded
 /// copy of each feature map beside the map itself.
-const PAD_BAND_BYTES: usize = 4 << 20;
+pub(crate) const PAD_BAND_BYTES: usize = 4 << 20;
 /// Fewest output rows per band: the `kh − 1` halo rows padded twice stay a small share.
-const MIN_BAND_ROWS: usize = 8;
+pub(crate) const MIN_BAND_ROWS: usize = 8;
 
 /// Layout of a padded copy of `rows` consecutive padded rows of one image (all `Hp = H + 2p`
 /// or a band of them): per channel, each row the `s` phases of its `Wp = W + 2p` padded
@@ -282,6 +295,9 @@ fn run_in_bands(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], band: us
     assert_eq!(x.len(), g.b * x_len, "direct conv: input of the wrong size");
     let layout = Padded::new(g, band);
     let bands = g.ho.div_ceil(band);
+    let taps: Vec<usize> = (0..g.kh)
+        .flat_map(|ky| (0..g.kw).map(move |kx| layout.tap(g, ky, kx)))
+        .collect();
     let y_addr = y.as_mut_ptr() as usize;
     (0..g.b * bands).into_par_iter().for_each_init(
         || vec![0.0; g.ci * layout.plane],
@@ -298,116 +314,130 @@ fn run_in_bands(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], band: us
                 xp,
             );
             let yi = (y_addr as *mut f32).wrapping_add(i * y_len) as usize;
+            let grid = TileGrid {
+                ci: g.ci,
+                plane_in: layout.plane,
+                taps: &taps,
+                in_base: 0,
+                in_row: layout.origin(g, 1, 0),
+                co: g.co,
+                plane_out: g.ho * g.wo,
+                rows: r1 - r0,
+                wo: g.wo,
+                out_base: r0 * g.wo,
+            };
             // SAFETY: `y` outlives the tasks; task (i, band) writes only output rows r0..r1
-            // of image i, which no other task writes.
-            unsafe { run_tiles(g, layout, xp, packed, yi, r0..r1) };
+            // of image i, which no other task writes; `xp` holds the padded rows they read.
+            unsafe { run_tiles(&grid, xp, packed, yi) };
         },
     );
 }
 
-/// Computes output rows `rows` of every output channel of one image from `xp`, the padded
-/// copy (layout `layout`) of the input rows they read, in tiles of [`TILE_VECTORS`] output
-/// vectors in row-major order.
+/// Where the register tiles of one band read and write: output texel (oy, ox) of the band
+/// (oy counted from its first row) sums, over the `ci` input channels and the `taps`, the
+/// floats of `xp` at `c·plane_in + in_base + oy·in_row + ox + tap`, and is stored at
+/// `o·plane_out + out_base + oy·wo + ox` of the output's channel planes.
+pub(crate) struct TileGrid<'a> {
+    /// Input channels summed over, `plane_in` floats apart in `xp`.
+    pub(crate) ci: usize,
+    pub(crate) plane_in: usize,
+    /// Offsets of the kernel taps in `xp`, in the packed weights' order.
+    pub(crate) taps: &'a [usize],
+    /// Offset in `xp` of tap offset 0 for output texel (0, 0), and between output rows.
+    pub(crate) in_base: usize,
+    pub(crate) in_row: usize,
+    /// Output channels, `plane_out` floats apart.
+    pub(crate) co: usize,
+    pub(crate) plane_out: usize,
+    /// Output rows of the band and texels per row.
+    pub(crate) rows: usize,
+    pub(crate) wo: usize,
+    /// Offset of the band's first output row in every output plane.
+    pub(crate) out_base: usize,
+}
+
+/// Computes every output channel of one band ([`TileGrid`]) from `xp` and the weights packed
+/// in tile order ([`pack_weights`]: `OC_BLOCK` channels, then `ci · taps` rows), in tiles of
+/// [`TILE_VECTORS`] output vectors in row-major order.
 ///
 /// # Safety
-/// `y_addr` is the address of the image's C_out·H_out·W_out outputs; no other thread writes
-/// these rows while this runs.
-unsafe fn run_tiles(
-    g: &Geometry,
-    layout: Padded,
-    xp: &[f32],
-    packed: &[f32],
-    y_addr: usize,
-    rows: std::ops::Range<usize>,
-) {
-    let plane_out = g.ho * g.wo;
-    // Whole vectors per output row, and the lanes of the row's last, partial one.
-    let (whole, tail) = (g.wo / LANES, g.wo % LANES);
-    let taps: Vec<usize> = (0..g.kh)
-        .flat_map(|ky| (0..g.kw).map(move |kx| layout.tap(g, ky, kx)))
-        .collect();
-    let k = g.k();
-    // (input offset in `xp`, output offset in a plane) of output texel (oy, ox), oy counted
-    // from the band's first row.
-    let at = |oy: usize, ox: usize| (layout.origin(g, oy, ox), (rows.start + oy) * g.wo + ox);
-    // The band's whole vectors in row-major order.
-    let vectors = rows.len() * whole;
-    let whole_at = |v: usize| at(v / whole.max(1), (v % whole.max(1)) * LANES);
-    let y = y_addr as *mut f32;
-    for b in 0..g.co.div_ceil(OC_BLOCK) {
-        let wb = &packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
-        let channels = OC_BLOCK.min(g.co - b * OC_BLOCK);
-        // SAFETY: block b's first channel plane lies inside the image's outputs.
-        let y_block = unsafe { y.add(b * OC_BLOCK * plane_out) };
-        let full = u16::MAX;
-        for t in (0..vectors).step_by(TILE_VECTORS) {
-            let count = TILE_VECTORS.min(vectors - t);
-            if count == TILE_VECTORS {
-                let mut ins = [0; TILE_VECTORS];
-                let mut outs = [0; TILE_VECTORS];
-                for j in 0..TILE_VECTORS {
-                    (ins[j], outs[j]) = whole_at(t + j);
-                }
-                // SAFETY: AVX-512F was detected (`supports_forward`); loads stay inside
-                // `xp` (offset + tap + 16 ≤ padded row), stores inside the tile's outputs.
-                unsafe {
-                    tile::<TILE_VECTORS>(
-                        xp,
-                        layout.plane,
-                        g.ci,
-                        &taps,
-                        ins,
-                        wb,
-                        (y_block, plane_out),
-                        outs,
-                        [full; TILE_VECTORS],
-                        channels,
-                    )
-                };
+/// `y_addr` is the address of the output planes; no other thread writes the band's rows
+/// while this runs, and `xp` holds every float the taps read (module docs).
+pub(crate) unsafe fn run_tiles(grid: &TileGrid, xp: &[f32], packed: &[f32], y_addr: usize) {
+    let TileGrid {
+        ci,
+        plane_in,
+        taps,
+        in_base,
+        in_row,
+        co,
+        plane_out,
+        rows,
+        wo,
+        out_base,
+    } = *grid;
+    let k = ci * taps.len();
+    // The band's vectors in row-major order, (input offset in `xp`, output offset in a plane,
+    // lanes): each row's whole vectors, then its last, partial one masked.
+    let mut vectors = Vec::with_capacity(rows * wo.div_ceil(LANES));
+    for oy in 0..rows {
+        for ox in (0..wo).step_by(LANES) {
+            let lanes = LANES.min(wo - ox);
+            let mask = if lanes == LANES {
+                u16::MAX
             } else {
-                for j in t..t + count {
-                    let (i, o) = whole_at(j);
-                    // SAFETY: as above, one vector.
-                    unsafe {
-                        tile::<1>(
-                            xp,
-                            layout.plane,
-                            g.ci,
-                            &taps,
-                            [i],
-                            wb,
-                            (y_block, plane_out),
-                            [o],
-                            [full],
-                            channels,
-                        )
-                    };
-                }
-            }
+                (1u16 << lanes) - 1
+            };
+            vectors.push((in_base + oy * in_row + ox, out_base + oy * wo + ox, mask));
         }
-        if tail > 0 {
-            let mask = (1u16 << tail) - 1;
-            for oy in 0..rows.len() {
-                let (i, o) = at(oy, whole * LANES);
-                // SAFETY: as above; the masked lanes past the row's end are neither read nor
-                // written.
-                unsafe {
-                    tile::<1>(
-                        xp,
-                        layout.plane,
-                        g.ci,
-                        &taps,
-                        [i],
-                        wb,
-                        (y_block, plane_out),
-                        [o],
-                        [mask],
-                        channels,
-                    )
-                };
+    }
+    let y = y_addr as *mut f32;
+    // Tiles of TILE_VECTORS consecutive vectors, the band's last tile of 1 to 3: a row's
+    // partial vector shares a tile with its neighbours rather than taking one alone. Every
+    // block of output channels runs on a group of vectors before the next group: the
+    // group's input rows (C_in · 4 vectors per tap row) stay in L1 across the blocks, and
+    // only the broadcast weights (6 floats per channel and tap) come from L2.
+    for group in vectors.chunks(TILE_VECTORS) {
+        for b in 0..co.div_ceil(OC_BLOCK) {
+            let wb = &packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
+            let channels = OC_BLOCK.min(co - b * OC_BLOCK);
+            // SAFETY: block b's first channel plane lies inside the outputs.
+            let out = (unsafe { y.add(b * OC_BLOCK * plane_out) }, plane_out);
+            // SAFETY: AVX-512F was detected (the callers' gates); loads stay inside `xp`,
+            // stores inside the tile's outputs, masked lanes past a row's end are neither
+            // read nor written (caller's contract).
+            unsafe {
+                match group.len() {
+                    4 => tile_of::<4>(xp, plane_in, ci, taps, group, wb, out, channels),
+                    3 => tile_of::<3>(xp, plane_in, ci, taps, group, wb, out, channels),
+                    2 => tile_of::<2>(xp, plane_in, ci, taps, group, wb, out, channels),
+                    _ => tile_of::<1>(xp, plane_in, ci, taps, group, wb, out, channels),
+                }
             }
         }
     }
+}
+
+/// [`tile`] over `NV` vectors given as (input offset, output offset, lanes) triples.
+///
+/// # Safety
+/// As [`tile`]'s.
+#[allow(clippy::too_many_arguments)]
+unsafe fn tile_of<const NV: usize>(
+    xp: &[f32],
+    plane_in: usize,
+    ci: usize,
+    taps: &[usize],
+    group: &[(usize, usize, u16)],
+    wb: &[f32],
+    out: (*mut f32, usize),
+    channels: usize,
+) {
+    let ins: [usize; NV] = std::array::from_fn(|j| group[j].0);
+    let outs: [usize; NV] = std::array::from_fn(|j| group[j].1);
+    let masks: [u16; NV] = std::array::from_fn(|j| group[j].2);
+    // SAFETY: the caller's.
+    unsafe { tile::<NV>(xp, plane_in, ci, taps, ins, wb, out, outs, masks, channels) }
 }
 
 /// One register tile: `rows` (≤ [`OC_BLOCK`]) output channels × `NV` vectors, summed over
@@ -735,7 +765,8 @@ mod tests {
     /// - unpadded 3×3 convolutions whose forward (W 18 → 16) or input gradient (W 16) alone is
     ///   direct;
     /// - stride 2 on odd and even widths (the discriminator's 33 → 16 after its blur, the
-    ///   estimator's padded 4×4), whose input gradients stay on im2col;
+    ///   estimator's padded 4×4, a padded 3×3) and stride 3, whose input gradients run phase
+    ///   by phase (circular ones only where H = s·H_out);
     /// - 70 and 40 output channels (weight-gradient tiles of 4 + 1 and 3 vectors);
     /// - rows ending in a partial, masked vector (20, 33 and strided 33 output columns);
     /// - 24 output channels at 24 × 32 texels (2-vector weight-gradient tiles over three L1
@@ -758,6 +789,8 @@ mod tests {
         (2, 2, 4, 33, 5, 3, 1, 1),
         (1, 3, 9, 67, 6, 3, 2, 0),
         (1, 2, 24, 32, 24, 3, 1, 1),
+        (2, 3, 8, 32, 5, 3, 2, 1),
+        (1, 2, 9, 48, 4, 3, 3, 0),
     ];
 
     #[test]
@@ -819,12 +852,13 @@ mod tests {
                 }
             }
         }
-        // Of the 30 (case, mode) pairs, 26 forwards are direct (not the pointwise one, left to
-        // gemm, nor the unpadded one at W 16, 14 output columns: narrower than a vector), 20
+        // Of the 34 (case, mode) pairs, 30 forwards are direct (not the pointwise one, left to
+        // gemm, nor the unpadded one at W 16, 14 output columns: narrower than a vector), 28
         // input gradients (nor the unpadded circular 3×3s, whose adjoint needs a padding of 2
-        // that wraps another way, nor the strided ones) and 28 weight gradients (all but the
-        // pointwise one), at 3 thread counts: the gates did not silently turn a kernel off.
-        assert_eq!(direct, (3 * 26, 3 * 20, 3 * 28));
+        // that wraps another way, nor the circular stride-2 ones of 9 rows, not 2·H_out) and
+        // 32 weight gradients (all but the pointwise one), at 3 thread counts: the gates did
+        // not silently turn a kernel off.
+        assert_eq!(direct, (3 * 30, 3 * 28, 3 * 32));
         Ok(())
     }
 
@@ -852,7 +886,9 @@ mod tests {
                     x.flatten_all()?.to_vec1::<f32>()?,
                     wt.flatten_all()?.to_vec1::<f32>()?,
                 );
-                let packed = pack_weights(&g, |o, k| wv[o * g.k() + k]);
+                let packed = pack_weights(g.co, g.k(), |o, dst| {
+                    dst.copy_from_slice(&wv[o * g.k()..][..g.k()])
+                });
                 let mut whole = vec![f32::NAN; g.y_shape().elem_count()];
                 run_in_bands(&g, &xv, &packed, &mut whole, 16);
                 let mut banded = vec![f32::NAN; g.y_shape().elem_count()];
@@ -870,10 +906,15 @@ mod tests {
     #[test]
     fn direct_conv_declines_what_it_does_not_compute() -> Result<()> {
         let g = |x, w, spec| Geometry::new(x, w, spec);
-        // A strided input gradient, a row of 8 texels, and circular padding that is not
-        // "same".
-        let strided = g((1, 2, 16, 32), (2, 2, 4, 4), Conv2dSpec::zeros(2, 1))?;
+        // Strided input gradients with a phase row of 8 texels, a phase without a tap (1×1
+        // stride 2), a circular wrap of another period (H 9 ≠ 2·H_out); a row of 8 texels;
+        // circular padding that is not "same".
+        let strided = g((1, 2, 16, 16), (2, 2, 4, 4), Conv2dSpec::zeros(2, 1))?;
         assert!(!supports_input_grad(&strided));
+        let tapless = g((1, 2, 16, 64), (2, 2, 1, 1), Conv2dSpec::zeros(2, 0))?;
+        assert!(!supports_input_grad(&tapless));
+        let odd_wrap = g((1, 2, 9, 64), (2, 2, 3, 3), Conv2dSpec::circular(2, 0))?;
+        assert!(!supports_input_grad(&odd_wrap));
         let narrow = g((1, 2, 8, 8), (2, 2, 3, 3), Conv2dSpec::circular(1, 1))?;
         assert!(!supports_forward(&narrow) && !supports_input_grad(&narrow));
         let wrapped = g((1, 2, 16, 16), (2, 2, 3, 3), Conv2dSpec::circular(1, 2))?;

@@ -8,8 +8,9 @@
 //! - [`conv2d`]: im2col + `gemm` convolution with zero or circular padding, forward, input
 //!   gradient and weight gradient each a custom op, differentiable to any order ([`conv`]).
 //!   On AVX-512, f32 forwards whose output rows hold at least one 16-float vector, their
-//!   stride-1 input gradients and weight gradients over ≥ 1024 texels (pointwise convolutions
-//!   aside) run on direct register-blocked kernels instead ([`direct_conv`]).
+//!   input gradients and weight gradients over ≥ 1024 texels (pointwise convolutions
+//!   aside) run on direct register-blocked kernels instead ([`direct_conv`]; strided input
+//!   gradients phase by phase, [`strided_input_grad`]).
 //! - [`conv2d_fast_backward`]: unpadded strided `conv2d` whose input gradient is a polyphase
 //!   `conv2d` instead of candle's slow direct-loop `conv_transpose2d` ([`conv_grad`]).
 //! - [`leaky_relu`], [`leaky_relu_gain`], [`bias_leaky_relu_gain`]: (bias +) LeakyReLU (× gain)
@@ -54,6 +55,7 @@ pub mod noise_act;
 pub mod periodic_window;
 pub mod plane_ops;
 pub mod reference;
+pub mod strided_input_grad;
 pub mod testing;
 pub mod threads;
 
