@@ -42,6 +42,7 @@
 
 use rayon::prelude::*;
 
+use crate::alloc::output_buffer;
 use crate::conv::{Conv2dSpec, Geometry, PaddingMode};
 use crate::strided_input_grad;
 
@@ -300,7 +301,8 @@ fn run_in_bands(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], band: us
         .collect();
     let y_addr = y.as_mut_ptr() as usize;
     (0..g.b * bands).into_par_iter().for_each_init(
-        || vec![0.0; g.ci * layout.plane],
+        // SAFETY: `pad_rows` writes every row of the band before the tiles read it.
+        || unsafe { output_buffer::<f32>(g.ci * layout.plane) },
         |xp, job| {
             let (i, r0) = (job / bands, (job % bands) * band);
             let r1 = (r0 + band).min(g.ho);
@@ -576,7 +578,8 @@ pub(crate) fn weight_grad(g: &Geometry, x: &[f32], dy: &[f32], dw: &mut [f32], t
         .map(|first| {
             // Channels-last sums: [c][tap][o], C_in and C_out padded to whole tiles.
             let mut sums = vec![0.0; ci_pad * taps * co_pad];
-            let mut xp = vec![0.0; g.ci * layout.plane];
+            // SAFETY: `pad_rows` writes all of it before the first band reads it.
+            let mut xp = unsafe { output_buffer::<f32>(g.ci * layout.plane) };
             let mut dy_rows = vec![0.0; band * g.wo * co_pad];
             let mut padded = None;
             for unit in first..(first + per).min(units) {

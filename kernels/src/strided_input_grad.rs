@@ -29,6 +29,7 @@
 
 use rayon::prelude::*;
 
+use crate::alloc::output_buffer;
 use crate::conv::Geometry;
 use crate::direct_conv::{self, LANES, MIN_BAND_ROWS, PAD_BAND_BYTES, TileGrid};
 
@@ -223,10 +224,12 @@ fn run_in_bands(
     let phase_len = g.ci * band * row;
     let sx = cols.phases.len();
     (0..g.b * bands).into_par_iter().for_each_init(
-        || {
+        // SAFETY: `pad_band` writes every padded row a band reads, the tiles every phase
+        // texel the merge reads (module docs), before they are read.
+        || unsafe {
             (
-                vec![0.0; g.co * plane_in],
-                vec![0.0; phases.len() * phase_len],
+                output_buffer::<f32>(g.co * plane_in),
+                output_buffer::<f32>(phases.len() * phase_len),
             )
         },
         |(dyp, out), job| {
