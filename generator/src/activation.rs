@@ -54,12 +54,21 @@ pub fn lrelu(x: &Tensor) -> Result<Tensor> {
 /// # Shapes
 /// x (B, C, …) of rank ≥ 2, bias (C) → x's shape.
 pub fn bias_lrelu(x: &Tensor, bias: &Tensor) -> Result<Tensor> {
+    bias_leaky_relu_gain(x, bias, LRELU_SLOPE, LRELU_GAIN)
+}
+
+/// `gain · LeakyReLU(x + bias, slope)`, the bias added along dimension 1: one pass each way on
+/// the CPU; a layer's output gain after [`bias_lrelu`] is this with `gain = √2 · layer gain`.
+///
+/// # Shapes
+/// x (B, C, …) of rank ≥ 2, bias (C) → x's shape.
+pub fn bias_leaky_relu_gain(x: &Tensor, bias: &Tensor, slope: f64, gain: f64) -> Result<Tensor> {
     if !photomat_kernels::reference_ops() {
-        return photomat_kernels::bias_leaky_relu_gain(x, bias, LRELU_SLOPE, LRELU_GAIN);
+        return photomat_kernels::bias_leaky_relu_gain(x, bias, slope, gain);
     }
     let mut shape = vec![1; x.rank()];
     shape[1] = bias.elem_count();
-    lrelu(&x.broadcast_add(&bias.reshape(shape)?)?)
+    leaky_relu_gain(&x.broadcast_add(&bias.reshape(shape)?)?, slope, gain)
 }
 
 /// A synthesis layer's epilogue: `√2 · LeakyReLU(x + noise + bias, 0.2)` with one noise image

@@ -41,7 +41,7 @@
 use candle_core::{D, Result, Tensor, bail};
 use candle_nn::VarBuilder;
 
-use crate::activation::{bias_lrelu, lrelu};
+use crate::activation::{LRELU_GAIN, LRELU_SLOPE, bias_leaky_relu_gain, leaky_relu_gain};
 use crate::equalized::{
     EqualizedConv2d, EqualizedLinear, LinearConfig, equalized_conv2d, equalized_linear,
 };
@@ -84,25 +84,30 @@ impl DConv {
     /// (B, C_in, H, W) → (B, C_out, H/2, W/2) when downsampling, (B, C_out, H, W) otherwise.
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
         let k = self.conv.kernel();
+        // The output gain goes into the weights of a linear layer (the residual skip) and into
+        // the fused activation's gain otherwise: no pass over the output of its own.
+        let linear_gain = if self.activate { 1.0 } else { self.gain };
+        let zeros = Padding::Zeros;
         let y = match (self.down, k) {
-            (false, _) => self.conv.conv(x, 1, k / 2, Padding::Zeros)?,
-            (true, 1) => self
-                .conv
-                .conv_unpadded(&downsample2d(x, Padding::Zeros)?, 1)?,
-            (true, 3) => self
-                .conv
-                .conv_unpadded(&blur_for_strided_conv(x, Padding::Zeros)?, 2)?,
+            (false, _) => self.conv.conv_times(x, 1, k / 2, zeros, linear_gain)?,
+            (true, 1) => {
+                self.conv
+                    .conv_times(&downsample2d(x, zeros)?, 1, 0, zeros, linear_gain)?
+            }
+            (true, 3) => {
+                let blurred = blur_for_strided_conv(x, zeros)?;
+                self.conv.conv_times(&blurred, 2, 0, zeros, linear_gain)?
+            }
             (true, k) => bail!("discriminator: no downsampling {k}×{k} conv"),
         };
-        let y = match (self.activate, self.conv.bias()) {
-            (true, Some(b)) => bias_lrelu(&y, b)?,
-            (true, None) => lrelu(&y)?,
-            (false, _) => self.conv.add_bias(&y)?,
-        };
-        if self.gain == 1.0 {
-            Ok(y)
-        } else {
-            y.affine(self.gain, 0.0)
+        let gain = LRELU_GAIN * self.gain;
+        match (self.activate, self.conv.bias()) {
+            (true, Some(b)) => bias_leaky_relu_gain(&y, b, LRELU_SLOPE, gain),
+            (true, None) => leaky_relu_gain(&y, LRELU_SLOPE, gain),
+            (false, Some(b)) if self.gain != 1.0 => {
+                photomat_kernels::add_channel_bias(&y, &b.affine(self.gain, 0.0)?)
+            }
+            (false, _) => self.conv.add_bias(&y),
         }
     }
 }
@@ -335,7 +340,54 @@ impl Discriminator {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use candle_core::Device;
+    use candle_core::{DType, Device};
+    use candle_nn::VarMap;
+
+    #[test]
+    fn a_layer_gain_folded_into_weights_or_activation_scales_the_output() -> Result<()> {
+        // A layer's output gain is applied inside its conv's weights (linear layers) or its
+        // fused activation's gain: the layer with gain g must give g × the layer with gain 1,
+        // same weights, for every (bias, activation, down, kernel) the discriminator uses, on
+        // the fast ops and on plain candle.
+        let dev = Device::Cpu;
+        let x = photomat_core::rng::pseudo_random((2, 3, 8, 8), 4, DType::F64, &dev)?;
+        let g = 0.6;
+        for (bias, activate, down, k) in [
+            (true, true, false, 3),
+            (true, true, true, 3),
+            (false, false, true, 1),
+            (true, false, false, 3),
+            (false, true, false, 1),
+        ] {
+            let vm = VarMap::new();
+            let vb = VarBuilder::from_varmap(&vm, DType::F64, &dev);
+            let scaled = dconv(3, 4, k, (bias, activate, down, g), vb.pp("l"))?;
+            let plain = dconv(3, 4, k, (bias, activate, down, 1.0), vb.pp("l"))?;
+            if bias {
+                // Non-zero biases, so that a bias left unscaled shows.
+                let b = vm.data().lock().expect("lock")["l.bias"].clone();
+                b.set(&Tensor::new(&[0.3, -0.2, 0.5, -0.7], &dev)?)?;
+            }
+            for reference in [false, true] {
+                let run = || -> Result<(Tensor, Tensor)> {
+                    Ok((scaled.forward(&x)?, plain.forward(&x)?.affine(g, 0.0)?))
+                };
+                let (a, b) = if reference {
+                    photomat_kernels::with_reference_ops(run)?
+                } else {
+                    run()?
+                };
+                let err = (a - b)?.abs()?.max_all()?.to_scalar::<f64>()?;
+                // f64 rounding of O(1) sums.
+                assert!(
+                    err < 1e-12,
+                    "{:?} reference {reference}: {err}",
+                    (bias, activate, down, k)
+                );
+            }
+        }
+        Ok(())
+    }
 
     #[test]
     fn sharpen_boosts_detail_around_the_replicated_3x3_mean() {

@@ -173,14 +173,6 @@ impl EqualizedConv2d {
         self.weight.dims()[2]
     }
 
-    /// Convolution of an already padded input, without bias.
-    ///
-    /// # Shapes
-    /// (B, in, H, W) → (B, out, (H − k)/stride + 1, (W − k)/stride + 1).
-    pub fn conv_unpadded(&self, x: &Tensor, stride: usize) -> Result<Tensor> {
-        self.conv(x, stride, 0, Padding::Zeros)
-    }
-
     /// Convolution with `padding` texels of the given mode on every side, without bias:
     /// photomat-kernels' im2col + gemm [`conv2d`](photomat_kernels::conv2d), differentiable
     /// to any order (R1 through D), or explicit padding and candle's `conv2d` inside
@@ -189,8 +181,24 @@ impl EqualizedConv2d {
     /// # Shapes
     /// (B, in, H, W) → (B, out, (H + 2·padding − k)/stride + 1, likewise W).
     pub fn conv(&self, x: &Tensor, stride: usize, padding: usize, mode: Padding) -> Result<Tensor> {
+        self.conv_times(x, stride, padding, mode, 1.0)
+    }
+
+    /// [`Self::conv`] times `gain`, folded into the (small) weight tensor rather than applied
+    /// to the (large) output: a linear layer's output gain for the price of none.
+    ///
+    /// # Shapes
+    /// As [`Self::conv`].
+    pub fn conv_times(
+        &self,
+        x: &Tensor,
+        stride: usize,
+        padding: usize,
+        mode: Padding,
+        gain: f64,
+    ) -> Result<Tensor> {
         let (_b, _c, _h, _w) = x.dims4()?;
-        let w = self.weight.affine(self.weight_gain, 0.0)?;
+        let w = self.weight.affine(self.weight_gain * gain, 0.0)?;
         if photomat_kernels::reference_ops() {
             return pad2d(x, padding, mode)?.conv2d(&w, 0, stride, 1, 1);
         }
