@@ -14,7 +14,8 @@
 //! `docs/neural-models.md`, "GAN training"), with no derivative w.r.t. the constant matrix.
 //!
 //! CPU tensors of dtype f32 and f64 take the sparse path, split over rayon above 65,536
-//! output elements. Other devices and dtypes, and every call inside
+//! output elements; on AVX-512 the rows of an f32 width pass that repeat (the filters' interior,
+//! away from the edges) run 16 outputs per vector ([`crate::fir_simd`]). Other devices and dtypes, and every call inside
 //! [`crate::reference::with_reference_ops`], use [`separable_reference`]: dense matrices and
 //! candle's `matmul`, whose first and second derivatives are exact in candle 0.11
 //! (`docs/candle-notes.md`, "Gradients that were checked and are right").
@@ -26,6 +27,7 @@ use candle_core::{CpuStorage, CustomOp1, DType, Device, Layout, Result, Shape, T
 use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
+use crate::fir_simd::Periodic;
 
 use crate::threads::ELEMENTWISE_CHUNK as PARALLEL_ELEMENTS;
 
@@ -264,6 +266,8 @@ struct Band<T> {
     width: usize,
     first: Vec<usize>,
     weights: Vec<T>,
+    /// f32 rows that repeat, run 16 outputs per vector ([`crate::fir_simd`]).
+    periodic: Option<Periodic>,
 }
 
 impl<T: candle_core::WithDType> Band<T> {
@@ -296,10 +300,17 @@ impl<T: candle_core::WithDType> Band<T> {
             }
             *f = start;
         }
+        let periodic = (T::DTYPE == DType::F32)
+            .then(|| {
+                let w32: Vec<f32> = weights.iter().map(|w| w.to_f64() as f32).collect();
+                Periodic::find(&first, &w32, width)
+            })
+            .flatten();
         Some(Self {
             width,
             first,
             weights,
+            periodic,
         })
     }
 }
@@ -356,7 +367,23 @@ fn banded_row<T: candle_core::WithDType, const W: usize>(
     out: &mut [T],
 ) {
     debug_assert_eq!(band.width, W);
-    for ((j, d), w) in out.iter_mut().enumerate().zip(band.weights.chunks_exact(W)) {
+    let skip = match &band.periodic {
+        Some(p) => {
+            // SAFETY: `periodic` is only set for f32 bands (`Band::new`), so T is f32.
+            let (x32, out32) = unsafe {
+                (
+                    std::slice::from_raw_parts(x.as_ptr() as *const f32, x.len()),
+                    std::slice::from_raw_parts_mut(out.as_mut_ptr() as *mut f32, out.len()),
+                )
+            };
+            p.run(x32, out32);
+            p.rows()
+        }
+        None => 0..0,
+    };
+    // The rows before and after the periodic run, one dot product each.
+    for j in (0..skip.start).chain(skip.end.max(skip.start)..out.len()) {
+        let (d, w) = (&mut out[j], &band.weights[j * W..(j + 1) * W]);
         let f = band.first[j];
         if f == Band::<T>::SPARSE {
             *d = sparse(j, x);
@@ -509,6 +536,63 @@ mod tests {
             let x32 = x.as_tensor().to_dtype(DType::F32)?;
             let y32 = separable(&x32, &m_h, &m_w)?.to_dtype(DType::F64)?;
             assert!(max_abs_diff(&y32, &ry)? < 1e-5, "f32 case {i}");
+        }
+        Ok(())
+    }
+
+    #[test]
+    fn periodic_rows_match_the_dense_product() -> Result<()> {
+        // StyleGAN2's [1, 3, 3, 1] / 8 with its real, equal weights in every row: blur
+        // (period 1, shift 1), ×2 down (1, 2) and its transpose (2, 1), zero-padded and
+        // wrapped, on even and odd lengths, rows of 9 to 65 outputs (a partial last vector,
+        // one and several vectors). On AVX-512 the periodic run must be found (else this
+        // tests nothing new) and the f32 pass must equal the dense f64 product.
+        let dev = Device::Cpu;
+        let taps = [1.0, 3.0, 3.0, 1.0].map(|t| t / 8.0);
+        let filter = |n_out: usize, n_in: usize, step: usize, wrap: bool| {
+            let rows: Vec<Vec<(usize, f64)>> = (0..n_out)
+                .map(|r| {
+                    (0..4)
+                        .filter_map(|t| {
+                            let c = (r * step + t) as isize - 2;
+                            if (0..n_in as isize).contains(&c) {
+                                Some((c as usize, taps[t]))
+                            } else {
+                                wrap.then(|| (c.rem_euclid(n_in as isize) as usize, taps[t]))
+                            }
+                        })
+                        .collect()
+                })
+                .collect();
+            AxisMatrix::from_rows(n_in, &rows).expect("valid rows")
+        };
+        let avx512 = crate::fir_simd::has_avx512();
+        for n in [64, 40, 33, 20] {
+            for wrap in [false, true] {
+                let blur = filter(n + 1, n, 1, wrap);
+                let down = filter(n / 2, n, 2, wrap);
+                for (m, period, shift) in
+                    [(blur, 1, 1), (down.clone(), 1, 2), (down.transpose(), 2, 1)]
+                {
+                    let case = format!("n {n} wrap {wrap} ({period}, {shift})");
+                    let band = Band::<f32>::new(&m).expect("a band");
+                    if avx512 {
+                        let p = band.periodic.expect("a periodic run");
+                        assert_eq!((p.period, p.shift), (period, shift), "{case}");
+                    }
+                    let x = pseudo_random((2, 3, 5, m.n_in()), n as u64, DType::F64, &dev)?;
+                    let got =
+                        axis_pass(&x.to_dtype(DType::F32)?, Arc::new(m.clone()), Axis::Width)?;
+                    let dense = m.to_dense(DType::F64, &dev)?;
+                    let want = x
+                        .reshape((30, m.n_in()))?
+                        .matmul(&dense.t()?)?
+                        .reshape(got.shape())?;
+                    // f32 sums of 4 products of values in [−1, 1]: rounding ≲ 4·6e-8.
+                    let err = max_abs_diff(&got.to_dtype(DType::F64)?, &want)?;
+                    assert!(err < 1e-6, "{case}: {err}");
+                }
+            }
         }
         Ok(())
     }

@@ -19,7 +19,8 @@
 //!   whose backward sums each plane contiguously instead of candle's strided reduction
 //!   ([`bias`]).
 //! - [`fir`]: separable FIR filtering/resampling, one sparse constant matrix per axis
-//!   (StyleGAN2's `upfirdn2d` with the `[1, 3, 3, 1]` filter), differentiable to any order.
+//!   (StyleGAN2's `upfirdn2d` with the `[1, 3, 3, 1]` filter), differentiable to any order;
+//!   the repeating rows of its f32 width pass 16 outputs per AVX-512 vector ([`fir_simd`]).
 //! - [`modulated_conv2d`]: StyleGAN2's modulated convolution (input styles, shared-weight
 //!   conv, output demodulation) as one op with a seven-pass backward ([`modulated_conv`]).
 //! - [`periodic_window()`]: a window of each sample's periodic extension (a tileable output
@@ -49,6 +50,7 @@ pub mod conv;
 pub mod conv_grad;
 pub mod direct_conv;
 pub mod fir;
+pub mod fir_simd;
 pub mod mlp;
 pub mod modulated_conv;
 pub mod noise_act;
