@@ -15,7 +15,7 @@
 //! `s²` phases of `dx` are `s²` such correlations, together `kh·kw` taps per input channel
 //! (the FLOP of the forward, where zero-insertion into `dy` would do `s²` times as many and
 //! im2col + `gemm` + col2im copies every product through a `kh·kw`-row column matrix). Each
-//! phase runs on [`direct_conv::run_tiles`] over one padded copy of `dy` that every phase
+//! phase runs on `direct_conv::run_tiles` over one padded copy of `dy` that every phase
 //! reads at its own offset (`dy` positions outside the output wrap, for circular padding, or
 //! are zeros), and its results are interleaved into `dx`. This is the decomposition of
 //! transposed convolutions into stride-1 ones used by deconvolution layers (Shi et al., "Is
@@ -25,7 +25,7 @@
 //! Circular padding wraps `dy` with period `H_out`, which is the forward's wrap only when the
 //! input is exactly `s` outputs per position (`H = s·H_out`, as in the estimator's 4×4 stride-2
 //! encoder); other circular geometries, phases without a tap (`k < s`), and phase rows shorter
-//! than one vector stay on im2col ([`supports`]).
+//! than one vector stay on im2col (`supports`).
 
 use rayon::prelude::*;
 
