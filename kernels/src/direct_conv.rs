@@ -250,10 +250,7 @@ fn pad_rows(g: &Geometry, layout: Padded, x: &[f32], rows: std::ops::Range<usize
                             let hi = (p + g.w).saturating_sub(q).div_ceil(s).clamp(lo, out.len());
                             if lo < hi {
                                 let first = lo * s + q - p;
-                                let inner = src[first..].iter().step_by(s);
-                                for (o, v) in out[lo..hi].iter_mut().zip(inner) {
-                                    *o = *v;
-                                }
+                                strided_copy(&src[first..], s, &mut out[lo..hi]);
                             }
                             for t in (0..lo).chain(hi..out.len()) {
                                 out[t] = match cols.get(t * s + q) {
@@ -265,6 +262,57 @@ fn pad_rows(g: &Geometry, layout: Padded, x: &[f32], rows: std::ops::Range<usize
                     }
                 }
             }
+        }
+    }
+}
+
+/// `dst[i] = src[s·i]` for every element of `dst`: one column phase of a padded row. Stride
+/// 2 (every strided layer here) takes the even lanes of 32 floats per vector on AVX-512; the
+/// scalar loop of other strides gathers one float at a time.
+fn strided_copy(src: &[f32], s: usize, dst: &mut [f32]) {
+    assert!(
+        dst.is_empty() || s * (dst.len() - 1) < src.len(),
+        "direct conv: strided copy past its row"
+    );
+    #[cfg(target_arch = "x86_64")]
+    if s == 2 && has_avx512() {
+        // SAFETY: AVX-512F was detected; the assertion bounds every read.
+        unsafe { even_lanes_avx512(src, dst) };
+        return;
+    }
+    for (d, v) in dst.iter_mut().zip(src.iter().step_by(s)) {
+        *d = *v;
+    }
+}
+
+/// [`strided_copy`] with stride 2 on AVX-512.
+///
+/// # Safety
+/// AVX-512F is available and `2·(dst.len() − 1) < src.len()`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+unsafe fn even_lanes_avx512(src: &[f32], dst: &mut [f32]) {
+    use std::arch::x86_64::*;
+    let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+    let mask = |n: usize| -> u16 {
+        if n >= LANES {
+            u16::MAX
+        } else {
+            (1u16 << n) - 1
+        }
+    };
+    for i0 in (0..dst.len()).step_by(LANES) {
+        let lanes = LANES.min(dst.len() - i0);
+        // Floats 2·i0 … 2·(i0 + lanes − 1) of src, in two masked loads.
+        let needed = 2 * lanes - 1;
+        // SAFETY: the masked loads read src[2·i0 ..][..needed], inside src by the contract;
+        // the masked store writes dst[i0 ..][..lanes].
+        unsafe {
+            let at = src.as_ptr().add(2 * i0);
+            let a = _mm512_maskz_loadu_ps(mask(needed), at);
+            let b = _mm512_maskz_loadu_ps(mask(needed.saturating_sub(LANES)), at.add(LANES));
+            let v = _mm512_permutex2var_ps(a, even, b);
+            _mm512_mask_storeu_ps(dst.as_mut_ptr().add(i0), mask(lanes), v);
         }
     }
 }
