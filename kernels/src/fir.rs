@@ -626,6 +626,25 @@ mod tests {
                     // f32 sums of 4 products of values in [−1, 1]: rounding ≲ 4·6e-8.
                     let err = max_abs_diff(&got.to_dtype(DType::F64)?, &want)?;
                     assert!(err < 1e-6, "{case}: {err}");
+                    // And to the bit the f32 dot products of the scalar rows (taps in column
+                    // order, multiply then add): a value must not depend on the path its row
+                    // takes, or rolling a tileable generator's input would not roll its output.
+                    let xs = x.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>()?;
+                    let weights = m.weights_as::<f32>();
+                    let scalar: Vec<f32> = xs
+                        .chunks(m.n_in())
+                        .flat_map(|row| {
+                            (0..m.n_out()).map(|j| {
+                                let span = m.starts[j]..m.starts[j + 1];
+                                let mut acc = 0.0f32;
+                                for (&c, &w) in m.cols[span.clone()].iter().zip(&weights[span]) {
+                                    acc += w * row[c];
+                                }
+                                acc
+                            })
+                        })
+                        .collect();
+                    assert_eq!(got.flatten_all()?.to_vec1::<f32>()?, scalar, "{case}");
                 }
             }
         }
