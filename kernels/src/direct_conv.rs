@@ -43,28 +43,15 @@
 use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
+use crate::avx512::{LANES, has_avx512, lane_mask};
 use crate::conv::{Conv2dSpec, Geometry, PaddingMode};
 use crate::strided_input_grad;
 
-/// f32 lanes of one AVX-512 vector: output texels per accumulator.
-pub(crate) const LANES: usize = 16;
 /// Output channels per register tile.
 const OC_BLOCK: usize = 6;
 /// Vectors of 16 output texels per register tile: `OC_BLOCK × TILE_VECTORS` = 24
 /// accumulators, plus `TILE_VECTORS` input vectors and one broadcast weight, of 32 registers.
 const TILE_VECTORS: usize = 4;
-
-/// Whether this CPU has the AVX-512 foundation instructions the kernel uses.
-pub(crate) fn has_avx512() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx512f")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
 
 /// Whether [`forward`] computes this convolution: any but a pointwise one with output rows of
 /// at least one vector (a row's last, partial vector is masked).
@@ -293,26 +280,13 @@ fn strided_copy(src: &[f32], s: usize, dst: &mut [f32]) {
 #[target_feature(enable = "avx512f")]
 unsafe fn even_lanes_avx512(src: &[f32], dst: &mut [f32]) {
     use std::arch::x86_64::*;
-    let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
-    let mask = |n: usize| -> u16 {
-        if n >= LANES {
-            u16::MAX
-        } else {
-            (1u16 << n) - 1
-        }
-    };
     for i0 in (0..dst.len()).step_by(LANES) {
         let lanes = LANES.min(dst.len() - i0);
-        // Floats 2·i0 … 2·(i0 + lanes − 1) of src, in two masked loads.
-        let needed = 2 * lanes - 1;
-        // SAFETY: the masked loads read src[2·i0 ..][..needed], inside src by the contract;
-        // the masked store writes dst[i0 ..][..lanes].
+        // SAFETY: the loads read src[2·i0 ..][..2·lanes − 1], inside src by the contract; the
+        // masked store writes dst[i0 ..][..lanes].
         unsafe {
-            let at = src.as_ptr().add(2 * i0);
-            let a = _mm512_maskz_loadu_ps(mask(needed), at);
-            let b = _mm512_maskz_loadu_ps(mask(needed.saturating_sub(LANES)), at.add(LANES));
-            let v = _mm512_permutex2var_ps(a, even, b);
-            _mm512_mask_storeu_ps(dst.as_mut_ptr().add(i0), mask(lanes), v);
+            let v = crate::avx512::load_even_lanes(src.as_ptr().add(2 * i0), lanes);
+            _mm512_mask_storeu_ps(dst.as_mut_ptr().add(i0), lane_mask(lanes), v);
         }
     }
 }
@@ -432,12 +406,7 @@ pub(crate) unsafe fn run_tiles(grid: &TileGrid, xp: &[f32], packed: &[f32], y_ad
     let mut vectors = Vec::with_capacity(rows * wo.div_ceil(LANES));
     for oy in 0..rows {
         for ox in (0..wo).step_by(LANES) {
-            let lanes = LANES.min(wo - ox);
-            let mask = if lanes == LANES {
-                u16::MAX
-            } else {
-                (1u16 << lanes) - 1
-            };
+            let mask = lane_mask(wo - ox);
             vectors.push((in_base + oy * in_row + ox, out_base + oy * wo + ox, mask));
         }
     }

@@ -14,8 +14,9 @@
 //! `docs/neural-models.md`, "GAN training"), with no derivative w.r.t. the constant matrix.
 //!
 //! CPU tensors of dtype f32 and f64 take the sparse path, split over rayon above 65,536
-//! output elements; on AVX-512 the rows of an f32 width pass that repeat (the filters' interior,
-//! away from the edges) run 16 outputs per vector ([`crate::fir_simd`]). Other devices and dtypes, and every call inside
+//! output elements; on AVX-512 the rows of an f32 width pass that repeat (the filters'
+//! interior, away from the edges) run 16 outputs per vector ([`crate::fir_simd`]). Other
+//! devices and dtypes, and every call inside
 //! [`crate::reference::with_reference_ops`], use [`separable_reference`]: dense matrices and
 //! candle's `matmul`, whose first and second derivatives are exact in candle 0.11
 //! (`docs/candle-notes.md`, "Gradients that were checked and are right").
@@ -221,7 +222,7 @@ struct AxisPass {
 fn height_pass<T: candle_core::WithDType>(m: &AxisMatrix, x: &[T], w: usize, out: &mut [T]) {
     let weights = m.weights_as::<T>();
     let (n_in, n_out) = (m.n_in(), m.n_out());
-    let avx512 = crate::fir_simd::has_avx512();
+    let avx512 = crate::avx512::has_avx512();
     let plane = |(o, x): (&mut [T], &[T])| {
         if avx512 {
             // SAFETY: AVX-512F was detected.
@@ -601,7 +602,7 @@ mod tests {
                 .collect();
             AxisMatrix::from_rows(n_in, &rows).expect("valid rows")
         };
-        let avx512 = crate::fir_simd::has_avx512();
+        let avx512 = crate::avx512::has_avx512();
         for n in [64, 40, 33, 20] {
             for wrap in [false, true] {
                 let blur = filter(n + 1, n, 1, wrap);

@@ -21,6 +21,8 @@
 //! kernels", tried and not adopted): the baseline x86-64 target vectorises only 4 wide, and
 //! the per-row setup ate the rest.
 
+use crate::avx512::{LANES, has_avx512, lane_mask};
+
 /// Widest band the interior runs: the `[1, 3, 3, 1]` filter's 4 taps.
 pub(crate) const MAX_TAPS: usize = 4;
 /// Fewest outputs per phase for which the interior pays over per-output dot products.
@@ -122,18 +124,6 @@ impl Periodic {
     }
 }
 
-/// Whether this CPU has AVX-512F.
-pub(crate) fn has_avx512() -> bool {
-    #[cfg(target_arch = "x86_64")]
-    {
-        std::arch::is_x86_feature_detected!("avx512f")
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    {
-        false
-    }
-}
-
 /// [`Periodic::run`]'s vectors.
 ///
 /// # Safety
@@ -143,18 +133,9 @@ pub(crate) fn has_avx512() -> bool {
 #[target_feature(enable = "avx512f")]
 unsafe fn row_avx512(p: &Periodic, x: &[f32], out: &mut [f32]) {
     use std::arch::x86_64::*;
-    const LANES: usize = 16;
-    let mask = |n: usize| -> u16 {
-        if n >= LANES {
-            u16::MAX
-        } else {
-            (1u16 << n) - 1
-        }
-    };
     let xp = x.as_ptr();
     let op = unsafe { out.as_mut_ptr().add(p.lo) };
-    // Even lanes of (a, b): 0, 2, …, 30; and the interleave of (a, b): a0 b0 a1 b1 …
-    let even = _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 16, 18, 20, 22, 24, 26, 28, 30);
+    // The interleave of (a, b): a0 b0 a1 b1 …
     let low = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
     let high = _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
     // Phase r's 16 sums for m = m0 … m0 + lanes − 1.
@@ -166,16 +147,9 @@ unsafe fn row_avx512(p: &Periodic, x: &[f32], out: &mut [f32]) {
             // SAFETY: the loads read only masked lanes, inside x (the caller's contract).
             let v = unsafe {
                 if p.shift == 1 {
-                    _mm512_maskz_loadu_ps(mask(lanes), xp.add(at))
+                    _mm512_maskz_loadu_ps(lane_mask(lanes), xp.add(at))
                 } else {
-                    // Lanes 2l of 32 floats, the last one at 2·(lanes − 1).
-                    let needed = 2 * lanes - 1;
-                    let a = _mm512_maskz_loadu_ps(mask(needed), xp.add(at));
-                    let b = _mm512_maskz_loadu_ps(
-                        mask(needed.saturating_sub(LANES)),
-                        xp.add(at + LANES),
-                    );
-                    _mm512_permutex2var_ps(a, even, b)
+                    crate::avx512::load_even_lanes(xp.add(at), lanes)
                 }
             };
             // Multiply, then add: rounded as the scalar dot products of the edge rows, so that
@@ -190,14 +164,18 @@ unsafe fn row_avx512(p: &Periodic, x: &[f32], out: &mut [f32]) {
         // SAFETY: the stores write only masked lanes, inside out (the caller's contract).
         unsafe {
             if p.period == 1 {
-                _mm512_mask_storeu_ps(op.add(m0), mask(lanes), phase(0, m0, lanes));
+                _mm512_mask_storeu_ps(op.add(m0), lane_mask(lanes), phase(0, m0, lanes));
             } else {
                 let (a, b) = (phase(0, m0, lanes), phase(1, m0, lanes));
                 let n = 2 * lanes;
-                _mm512_mask_storeu_ps(op.add(2 * m0), mask(n), _mm512_permutex2var_ps(a, low, b));
+                _mm512_mask_storeu_ps(
+                    op.add(2 * m0),
+                    lane_mask(n),
+                    _mm512_permutex2var_ps(a, low, b),
+                );
                 if n > LANES {
                     let hi = _mm512_permutex2var_ps(a, high, b);
-                    _mm512_mask_storeu_ps(op.add(2 * m0 + LANES), mask(n - LANES), hi);
+                    _mm512_mask_storeu_ps(op.add(2 * m0 + LANES), lane_mask(n - LANES), hi);
                 }
             }
         }

@@ -33,6 +33,8 @@
 //!   gain) as one element-wise pass each way ([`noise_act`]).
 //! - [`reference`]: a per-thread switch sending every op to its candle reference composition
 //!   (equivalence tests, same-process baselines).
+//! - [`avx512`]: run-time AVX-512 detection, lane masks and even-lane loads, shared by the
+//!   direct convolution and the FIR width pass.
 //! - [`alloc`]: the global allocator (mimalloc, opt-in feature) and thread count binaries use.
 //! - [`threads`]: binaries run candle's element-wise ops on the calling thread (candle's own
 //!   pool spins, which slows every step on a busy machine).
@@ -44,6 +46,7 @@
 
 pub mod activation;
 pub mod alloc;
+pub mod avx512;
 pub mod bias;
 pub mod circular_pad;
 pub mod conv;

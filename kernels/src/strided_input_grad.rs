@@ -30,8 +30,9 @@
 use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
+use crate::avx512::LANES;
 use crate::conv::Geometry;
-use crate::direct_conv::{self, LANES, MIN_BAND_ROWS, PAD_BAND_BYTES, TileGrid};
+use crate::direct_conv::{self, MIN_BAND_ROWS, PAD_BAND_BYTES, TileGrid};
 
 /// Bytes of the phases' results one task holds before merging them into `dx`: half of this
 /// VM's 2 MiB L2, so that the merge reads them from cache, not memory.
@@ -122,7 +123,7 @@ impl AxisPlan {
 /// The row and column plans of `g`'s input gradient, when [`input_grad`] computes it.
 fn plans(g: &Geometry) -> Option<(AxisPlan, AxisPlan)> {
     let s = g.stride;
-    if s < 2 || !direct_conv::has_avx512() {
+    if s < 2 || !crate::avx512::has_avx512() {
         return None;
     }
     // dy's wrap has period H_out: the forward's only when H = s·H_out (module docs).
@@ -393,7 +394,7 @@ mod tests {
 
     #[test]
     fn strided_input_gradient_in_bands_equals_the_whole_image() -> Result<()> {
-        if !direct_conv::has_avx512() {
+        if !crate::avx512::has_avx512() {
             eprintln!("no AVX-512 on this CPU: the direct kernels are never used");
             return Ok(());
         }
