@@ -808,6 +808,14 @@ pub(crate) fn apply_weight_grad(g: Geometry, x: &Tensor, dy: &Tensor) -> Result<
     x.contiguous()?.apply_op2(&dy.contiguous()?, WeightGrad(g))
 }
 
+/// The gradient with respect to `operand`, computed only when the backward pass will use it:
+/// candle asks a custom op for both operands' gradients, and drops those of operands outside
+/// the graph (a constant input such as the estimator's neural material, or a frozen layer's
+/// weights), so each of those would be a convolution's worth of work thrown away.
+fn needed(operand: &Tensor, grad: impl FnOnce() -> Result<Tensor>) -> Result<Option<Tensor>> {
+    operand.track_op().then(grad).transpose()
+}
+
 impl CustomOp2 for Forward {
     fn name(&self) -> &'static str {
         "photomat-conv2d"
@@ -831,8 +839,8 @@ impl CustomOp2 for Forward {
         g: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>)> {
         Ok((
-            Some(apply_input_grad(self.0, g, w)?),
-            Some(apply_weight_grad(self.0, x, g)?),
+            needed(x, || apply_input_grad(self.0, g, w))?,
+            needed(w, || apply_weight_grad(self.0, x, g))?,
         ))
     }
 }
@@ -860,8 +868,8 @@ impl CustomOp2 for InputGrad {
         g: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>)> {
         Ok((
-            Some(apply_forward(self.0, g, w)?),
-            Some(apply_weight_grad(self.0, g, dy)?),
+            needed(dy, || apply_forward(self.0, g, w))?,
+            needed(w, || apply_weight_grad(self.0, g, dy))?,
         ))
     }
 }
@@ -889,8 +897,8 @@ impl CustomOp2 for WeightGrad {
         g: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>)> {
         Ok((
-            Some(apply_input_grad(self.0, dy, g)?),
-            Some(apply_forward(self.0, x, g)?),
+            needed(x, || apply_input_grad(self.0, dy, g))?,
+            needed(dy, || apply_forward(self.0, x, g))?,
         ))
     }
 }
@@ -964,6 +972,27 @@ mod tests {
         // f64 sums of ≤ 2·5·16·(B·H·W ≤ 300) O(1) products in another order: rounding
         // ≈ 1e-13 at most; 1e-10 leaves margin and still catches any wrong tap (O(0.1)).
         check_against_reference(PaddingMode::Zeros, DType::F64, 1e-10)
+    }
+
+    /// With one operand a constant, the backward pass computes only the other's gradient
+    /// (`needed`): it must still be the reference's, and of the right operand.
+    #[test]
+    fn a_constant_operand_gets_no_gradient_and_the_other_the_right_one() -> Result<()> {
+        let dev = Device::Cpu;
+        let spec = Conv2dSpec::zeros(1, 1);
+        let x = Var::from_tensor(&pseudo_random((2, 3, 6, 5), 1, DType::F64, &dev)?)?;
+        let w = Var::from_tensor(&pseudo_random((4, 3, 3, 3), 2, DType::F64, &dev)?)?;
+        let g = pseudo_random((2, 4, 6, 5), 3, DType::F64, &dev)?;
+        let (_, rdx, rdw) = value_and_grads(conv2d_reference, &x, &w, &g, spec)?;
+        let grads = |x: &Tensor, w: &Tensor| -> Result<_> {
+            Ok((&conv2d(x, w, spec)? * &g)?.sum_all()?.backward()?)
+        };
+        let store = grads(&x.as_tensor().detach(), w.as_tensor())?;
+        assert!(max_abs_diff(store.get(w.as_tensor()).expect("dw"), &rdw)? < 1e-10);
+        let store = grads(x.as_tensor(), &w.as_tensor().detach())?;
+        assert!(max_abs_diff(store.get(x.as_tensor()).expect("dx"), &rdx)? < 1e-10);
+        assert!(store.get(w.as_tensor()).is_none());
+        Ok(())
     }
 
     #[test]
