@@ -12,7 +12,7 @@ use crate::Result;
 /// `[y, ∂L/∂u, ∂L/∂v, ∂⟨∂L/∂u, h⟩/∂v]` for `y = op(u, v)` and `L = Σ g ⊙ y`.
 ///
 /// The mixed derivative reaches v through the operands of the ops in the backward of `op`
-/// (candle detaches the incoming gradient unless `CANDLE_GRAD_DO_NOT_DETACH` is set), so it
+/// (a plain `backward` detaches the incoming gradient), so it
 /// exercises the backward of those ops, not a second backward through the gradient itself.
 ///
 /// # Shapes

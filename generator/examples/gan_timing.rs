@@ -75,11 +75,6 @@ fn median_ms(v: &[f64]) -> f64 {
 }
 
 fn main() -> Result<()> {
-    // R1 is a double backward: candle keeps the first backward's graph only with this flag,
-    // read at the thread's first backward() (`docs/candle-notes.md`). Set before any other
-    // thread exists.
-    // SAFETY: single-threaded at this point (no rayon pool has been started yet).
-    unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
     let mut positional = Vec::new();
     let (mut iters, mut modes) = (3usize, vec![true, false]); // true: plain candle.
     let mut args = std::env::args().skip(1);

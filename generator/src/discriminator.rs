@@ -311,28 +311,18 @@ impl Discriminator {
     /// fixed. The result keeps its graph so that its gradient reaches D's parameters (the
     /// trainer applies γ/2 and the batch mean).
     ///
-    /// This is a double backward: candle 0.11 detaches gradients unless
-    /// `CANDLE_GRAD_DO_NOT_DETACH=1` is set before the thread's first `backward()`
-    /// (`docs/candle-notes.md`, "Second-order gradients").
-    /// A detached input gradient is detected here and reported as an error instead of
-    /// returning a penalty whose parameter gradient would silently be zero.
+    /// This is a double backward: the input gradient comes from a backward pass that keeps its
+    /// graph (`backward_keeping_graph`, `docs/candle-notes.md`, "Second-order gradients").
     ///
     /// # Shapes
     /// image (B, 3, R, R), omega (B, 3, R, R) → (B).
     pub fn r1_penalty(&self, image: &Tensor, omega: &Tensor) -> Result<Tensor> {
         let x = candle_core::Var::from_tensor(&image.detach())?;
         let logits = self.forward(x.as_tensor(), omega)?;
-        let grads = logits.sum_all()?.backward()?;
+        let grads = logits.sum_all()?.backward_keeping_graph()?;
         let Some(gx) = grads.get(x.as_tensor()) else {
             bail!("R1 penalty: the logits do not depend on the image");
         };
-        if !gx.track_op() {
-            bail!(
-                "R1 penalty: candle detached the input gradient, so the penalty would have no \
-                 gradient; set CANDLE_GRAD_DO_NOT_DETACH=1 in the environment before the \
-                 thread's first backward()"
-            );
-        }
         gx.sqr()?.flatten_from(1)?.sum(1)
     }
 }

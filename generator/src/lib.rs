@@ -34,7 +34,7 @@
 //! padding inside the op, the fused modulated conv, sparse separable FIR passes, fused
 //! bias + LeakyReLU and noise epilogues), each with its own backward, itself differentiable
 //! where second derivatives are needed: the R1 penalty through D and path-length
-//! regularisation through G (`CANDLE_GRAD_DO_NOT_DETACH=1`). `tests/fast_ops.rs` checks G+M
+//! regularisation through G (whose inner pass is `backward_keeping_graph`). `tests/fast_ops.rs` checks G+M
 //! and D against the plain-candle composition (loss and every parameter gradient in f64),
 //! `tests/r1_gradient.rs` the R1 gradient against finite differences and its double backward
 //! against plain candle, `tests/g_second_order.rs` the path-length double backward. The

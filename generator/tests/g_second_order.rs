@@ -3,8 +3,7 @@
 //! norm with respect to G's parameters. G runs on photomat-kernels' fused ops (modulated conv,
 //! noise + bias + lrelu epilogue, sparse FIR), whose backward passes are built from ops with a
 //! backward; this checks that the double backward through them equals the one through plain
-//! candle ops, in zero-padded and tileable mode. One test: it sets
-//! `CANDLE_GRAD_DO_NOT_DETACH=1` before any backward pass
+//! candle ops, in zero-padded and tileable mode. The inner pass is `backward_keeping_graph`
 //! (`docs/candle-notes.md`, "Second-order gradients").
 
 mod common;
@@ -18,8 +17,6 @@ use photomat_kernels::with_reference_ops;
 
 #[test]
 fn path_length_double_backward_through_g_equals_plain_candle() -> Result<()> {
-    // SAFETY: the only test of this binary, set before any other thread runs candle code.
-    unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
     let dev = Device::Cpu;
     for tileable in [false, true] {
         let cfg = config(tileable);
@@ -36,7 +33,7 @@ fn path_length_double_backward_through_g_equals_plain_candle() -> Result<()> {
                 .forward(ws.as_tensor(), &NoiseInput::Given(&noise))?;
             let jvp = (f * &y)?.sum_all()?;
             let grad_ws = jvp
-                .backward()?
+                .backward_keeping_graph()?
                 .remove(ws.as_tensor())
                 .expect("F depends on w");
             assert!(grad_ws.track_op(), "the first gradient keeps its graph");

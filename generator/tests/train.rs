@@ -6,11 +6,11 @@
 //! moments (and one with part of them is refused), and the NaN guard skips poisoned updates and stops a diverged run, whose last
 //! checkpoint stays the last good state.
 //!
-//! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
-//! through one `Once`, so the variable is written before any test thread reads it.
+//! No test sets an environment variable: the R1 and path-length double backwards keep the
+//! graph of their inner pass themselves.
 
 mod training_data;
-use training_data::{second_order, simulated_dataset, snapshot};
+use training_data::{simulated_dataset, snapshot};
 
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -67,7 +67,6 @@ fn mean(v: &[f64]) -> f64 {
 
 #[test]
 fn discriminator_learns_and_nothing_is_non_finite() -> Result<()> {
-    second_order();
     let dir = tempfile::tempdir()?;
     let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let config = tiny_config(&data_dir, false);
@@ -109,7 +108,6 @@ fn discriminator_learns_and_nothing_is_non_finite() -> Result<()> {
 
 #[test]
 fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
-    second_order();
     let dir = tempfile::tempdir()?;
     let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let data = DatasetSource::open(&data_dir, 32)?;
@@ -159,7 +157,6 @@ fn resumed_run_is_bit_identical_to_an_uninterrupted_one() -> Result<()> {
 
 #[test]
 fn a_state_without_optimisers_resumes_the_networks_with_fresh_adam() -> Result<()> {
-    second_order();
     let dir = tempfile::tempdir()?;
     let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let data = DatasetSource::open(&data_dir, 32)?;
@@ -237,7 +234,6 @@ impl TrainingData for Poisoned {
 
 #[test]
 fn nan_guard_skips_poisoned_updates_and_stops_a_diverged_run() -> Result<()> {
-    second_order();
     let dir = tempfile::tempdir()?;
     let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let mut config = tiny_config(&data_dir, false);
@@ -282,7 +278,6 @@ fn nan_guard_skips_poisoned_updates_and_stops_a_diverged_run() -> Result<()> {
 
 #[test]
 fn a_skipped_update_is_logged_and_never_checkpointed() -> Result<()> {
-    second_order();
     let dir = tempfile::tempdir()?;
     let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let mut config = tiny_config(&data_dir, false);
@@ -325,7 +320,6 @@ fn a_skipped_update_is_logged_and_never_checkpointed() -> Result<()> {
 
 #[test]
 fn relief_switched_on_at_a_resume_starts_at_zero_and_then_trains() -> Result<()> {
-    second_order();
     let dir = tempfile::tempdir()?;
     let data_dir = simulated_dataset(dir.path(), 8, 3)?;
     let data = DatasetSource::open(&data_dir, 32)?;

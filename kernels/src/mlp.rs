@@ -582,12 +582,6 @@ fn mask<T: WithDType>(x: &mut [T], h: &[T], act: MlpActivation) {
     }
 }
 
-/// Whether candle keeps the graph of gradients (`CANDLE_GRAD_DO_NOT_DETACH`, read by the same
-/// rule as candle's backprop), i.e. whether a second backward can reach this op's backward.
-fn second_order_possible() -> bool {
-    std::env::var("CANDLE_GRAD_DO_NOT_DETACH").is_ok_and(|s| !s.is_empty() && s != "0")
-}
-
 /// Runs `f` over the blocks with their chunks of `saved`, on rayon's pool.
 fn for_blocks<T: Send, S: Send>(
     items: Vec<(Block, &mut [T])>,
@@ -779,7 +773,7 @@ impl Forward {
             io: self.io.clone(),
             hidden,
             inputs: inputs.iter().map(|t| (*t).clone()).collect(),
-            save_dz: second_order_possible(),
+            save_dz: candle_core::backprop::keeps_graph(),
             saved_dz: Mutex::new(None),
         };
         let packed = grad.contiguous()?.apply_op2(params, op)?;
@@ -1126,8 +1120,8 @@ impl CustomOp2 for Backward {
             .clone()
         else {
             bail!(
-                "per-texel mlp: second derivative through a backward that kept no gradients \
-                 (CANDLE_GRAD_DO_NOT_DETACH was not set when it ran)"
+                "per-texel mlp: second derivative through a backward pass that did not keep its graph \
+                 (use backward_keeping_graph for the first pass)"
             );
         };
         let op = SecondOrder {

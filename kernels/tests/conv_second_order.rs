@@ -4,9 +4,8 @@
 //! differentiated w.r.t. the weights) equals the same computation through candle's own `conv2d` and
 //! composite LeakyReLU, and f64 central differences.
 //!
-//! candle keeps the graph of a backward pass only when `CANDLE_GRAD_DO_NOT_DETACH` is set
-//! before the thread's first `backward()` (`docs/candle-notes.md`, "Second-order gradients"); this
-//! file holds a single test, which sets it first.
+//! The inner pass keeps the graph of its gradients (`backward_keeping_graph`,
+//! `docs/candle-notes.md`, "Second-order gradients").
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use photomat_core::rng::pseudo_random;
@@ -65,7 +64,10 @@ fn r1_and_grads(
 ) -> Result<(f64, Tensor, Tensor)> {
     let x = Var::from_tensor(x0)?;
     let d = discriminator(ops, x.as_tensor(), w1.as_tensor(), w2.as_tensor(), v)?;
-    let dx = d.backward()?.remove(x.as_tensor()).expect("D depends on x");
+    let dx = d
+        .backward_keeping_graph()?
+        .remove(x.as_tensor())
+        .expect("D depends on x");
     let r1 = dx.sqr()?.sum_all()?;
     let grads = r1.backward()?;
     let get = |w: &Var| {
@@ -79,9 +81,6 @@ fn r1_and_grads(
 
 #[test]
 fn conv_r1_gradient_matches_candle_and_finite_differences() -> Result<()> {
-    // SAFETY: set before any other thread of this test binary runs candle code (this is the
-    // binary's only test), so no concurrent environment read can race with the write.
-    unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
     let dev = Device::Cpu;
     let x = pseudo_random((2, 3, 8, 6), 1, DType::F64, &dev)?;
     let w1 = Var::from_tensor(&(pseudo_random((4, 3, 3, 3), 2, DType::F64, &dev)? * 0.5)?)?;

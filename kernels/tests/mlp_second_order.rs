@@ -5,8 +5,8 @@
 //! (f64), and that the derivatives the op does not implement fail loudly instead of being
 //! wrong.
 //!
-//! candle keeps the graph of a backward pass only when `CANDLE_GRAD_DO_NOT_DETACH` is set
-//! before the thread's first `backward()`; this file holds a single test, which sets it first.
+//! The inner passes keep the graph of their gradients (`backward_keeping_graph`,
+//! `docs/candle-notes.md`, "Second-order gradients").
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use photomat_core::rng::pseudo_random;
@@ -20,8 +20,6 @@ const ACT: MlpActivation = MlpActivation {
 
 #[test]
 fn path_length_double_backward_through_the_fused_mlp_equals_candle() -> Result<()> {
-    // SAFETY: the only test of this binary, set before any other thread runs candle code.
-    unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
     let dev = Device::Cpu;
     let (b, c, h, w) = (2, 4, 17, 19);
     let dims = [c + 3, 16, 16, 16, 3];
@@ -52,7 +50,7 @@ fn path_length_double_backward_through_the_fused_mlp_equals_candle() -> Result<(
     let first = |ws: &Var| -> Result<Tensor> {
         let f = ws.as_tensor().broadcast_mul(theta.as_tensor())?.tanh()?;
         let img = per_texel_mlp(&f, &omega, &layers, ACT)?;
-        let g = (img * &y)?.sum_all()?.backward()?;
+        let g = (img * &y)?.sum_all()?.backward_keeping_graph()?;
         Ok(g.get(ws.as_tensor()).cloned().expect("images depend on ws"))
     };
     let run = || -> Result<Vec<Tensor>> {
@@ -94,12 +92,12 @@ fn path_length_double_backward_through_the_fused_mlp_equals_candle() -> Result<(
     let ws = Var::from_tensor(&ws0)?;
     let f = ws.as_tensor().broadcast_mul(theta.as_tensor())?.tanh()?;
     let img = per_texel_mlp(&f, &omega, &layers, ACT)?;
-    let g = (img * &y)?.sum_all()?.backward()?;
+    let g = (img * &y)?.sum_all()?.backward_keeping_graph()?;
     let dw0 = g.get(params[0].0.as_tensor()).expect("a weight gradient");
     assert!(dw0.sqr()?.sum_all()?.backward().is_err());
     // Nor is a third derivative.
     let g = first(&ws)?;
-    let g2 = g.sqr()?.sum_all()?.backward()?;
+    let g2 = g.sqr()?.sum_all()?.backward_keeping_graph()?;
     let d2 = g2
         .get(params[1].0.as_tensor())
         .expect("a second-order gradient");

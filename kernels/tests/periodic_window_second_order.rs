@@ -4,9 +4,8 @@
 //! gather). Checks the double backward against the same computation through candle's
 //! `narrow` + `cat` composition (f64).
 //!
-//! candle keeps the graph of a backward pass only when `CANDLE_GRAD_DO_NOT_DETACH` is set
-//! before the thread's first `backward()` (`docs/candle-notes.md`, "Second-order gradients");
-//! this file holds a single test, which sets it first.
+//! The inner pass keeps the graph of its gradients (`backward_keeping_graph`,
+//! `docs/candle-notes.md`, "Second-order gradients").
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use photomat_core::rng::pseudo_random;
@@ -15,8 +14,6 @@ use photomat_kernels::{periodic_window, with_reference_ops};
 
 #[test]
 fn double_backward_through_the_window_equals_candle() -> Result<()> {
-    // SAFETY: the only test of this binary, set before any other thread runs candle code.
-    unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
     let dev = Device::Cpu;
     // A window inside the map and one larger than it (texels read twice).
     for (i, (shape, origins, window)) in [
@@ -35,7 +32,7 @@ fn double_backward_through_the_window_equals_candle() -> Result<()> {
             // L = Σ g ⊙ window(x)²: ∂L/∂x = adjoint(2·g ⊙ window(x)) depends on x through the
             // gather, so differentiating ⟨∂L/∂x, h⟩ again runs the adjoint's own backward.
             let y = periodic_window(x.as_tensor(), &origins, window)?;
-            let dx = (y.sqr()? * &g)?.sum_all()?.backward()?;
+            let dx = (y.sqr()? * &g)?.sum_all()?.backward_keeping_graph()?;
             let dx = dx.get(x.as_tensor()).expect("dx").clone();
             let ddx = (&dx * &h)?.sum_all()?.backward()?;
             let ddx = ddx.get(x.as_tensor()).expect("a second derivative");

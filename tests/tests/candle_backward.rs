@@ -2,7 +2,9 @@
 //! gradient contribution is stored as it is instead of being added to a zero-filled tensor, so
 //! it may be a strided view (a transpose, a broadcast). These graphs route such views into the
 //! rules that need contiguous gradients or accumulators (index_select's index_add, a second
-//! contribution, a reduction) and compare every gradient with its closed form.
+//! contribution, a reduction) and compare every gradient with its closed form. The patch's
+//! `backward_keeping_graph` keeps the graph of one pass's gradients only: a second derivative
+//! through it equals its closed form, and the passes before and after it detach.
 
 use candle_core::{D, Device, IndexOp, Result, Tensor, Var};
 
@@ -75,4 +77,29 @@ fn a_negated_first_contribution_through_a_reduction() -> Result<()> {
         grads.get(&x).expect("x has a gradient"),
         &[2., -1., -1., -2., -1., 3.],
     )
+}
+
+/// z = Σ (x²)²: ∂z/∂x = 4x³ passes through the node x², where a plain pass detaches the
+/// incoming gradient 2x², so differentiating Σ ∂z/∂x again gives 4x² there instead of the
+/// true 12x². A pass keeping its graph gives 12x², and only that pass keeps it.
+#[test]
+fn a_pass_keeping_its_graph_gives_second_derivatives_and_only_it() -> Result<()> {
+    let dev = Device::Cpu;
+    let x = Var::new(&[1f32, -2., 0.5], &dev)?;
+    let z = |x: &Var| x.as_tensor().sqr()?.sqr()?.sum_all();
+    let second = |grads: candle_core::backprop::GradStore| -> Result<Tensor> {
+        let dx = grads.get(&x).expect("a gradient");
+        assert_close(dx, &[4.0, -32.0, 0.5])?;
+        let d2 = dx.sum_all()?.backward()?;
+        Ok(d2.get(&x).expect("a second derivative").clone())
+    };
+    assert!(!candle_core::backprop::keeps_graph());
+    assert_close(&second(z(&x)?.backward()?)?, &[4.0, 16.0, 1.0])?;
+    assert_close(
+        &second(z(&x)?.backward_keeping_graph()?)?,
+        &[12.0, 48.0, 3.0],
+    )?;
+    assert!(!candle_core::backprop::keeps_graph());
+    assert_close(&second(z(&x)?.backward()?)?, &[4.0, 16.0, 1.0])?;
+    Ok(())
 }

@@ -2,23 +2,10 @@
 //! writes its state, GAN model folder, log and samples; `--resume` continues byte-identically
 //! to an uninterrupted run and refuses contradicting flags; bad inputs fail naming the
 //! problem.
-//!
-//! `train-gan` sets `CANDLE_GRAD_DO_NOT_DETACH=1` (R1 needs second-order gradients) unless it
-//! is set; every test sets it first through one `Once`, so no test thread writes the
-//! environment while another reads it.
 
 use photomat_tests::cli_fixtures::{path_str, photomat, photomat_error, simulated_dataset};
 
 use std::path::Path;
-use std::sync::Once;
-
-static ENV: Once = Once::new();
-
-fn second_order() {
-    // SAFETY: every test calls this before anything else, so no other test thread reads the
-    // environment while it is written.
-    ENV.call_once(|| unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") });
-}
 
 /// The flags of a tiny 32² model.
 const TINY: [&str; 6] = [
@@ -46,7 +33,6 @@ fn train(data: Option<&str>, run: &Path, extra: &[&str]) -> anyhow::Result<Strin
 
 #[test]
 fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
-    second_order();
     let dir = tempfile::tempdir().unwrap();
     let data = simulated_dataset(dir.path(), 64);
     let data = path_str(&data).to_string();
@@ -156,7 +142,6 @@ fn train_gan_runs_resumes_identically_and_refuses_contradictions() {
 
 #[test]
 fn train_gan_errors_name_the_problem() {
-    second_order();
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let run_s = run.to_str().unwrap();
@@ -228,7 +213,6 @@ fn train_gan_errors_name_the_problem() {
 
 #[test]
 fn train_gan_resume_keeps_the_cadence_may_lower_the_lr_and_the_folder_is_locked() {
-    second_order();
     let dir = tempfile::tempdir().unwrap();
     let data = simulated_dataset(dir.path(), 64);
     let data = path_str(&data).to_string();
@@ -268,7 +252,6 @@ fn train_gan_resume_keeps_the_cadence_may_lower_the_lr_and_the_folder_is_locked(
 /// finite, at the run's step; on a GAN folder without D it names what it needs.
 #[test]
 fn eval_gan_discriminator_probe_reads_the_runs_d() {
-    second_order();
     let dir = tempfile::tempdir().unwrap();
     let data = simulated_dataset(dir.path(), 64);
     let data = path_str(&data).to_string();
@@ -339,7 +322,6 @@ fn eval_gan_discriminator_probe_reads_the_runs_d() {
 /// each seed, writes the ranking into the run and copies the best snapshot out.
 #[test]
 fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
-    second_order();
     let dir = tempfile::tempdir().unwrap();
     let data = simulated_dataset(dir.path(), 64);
     let data = path_str(&data).to_string();

@@ -32,9 +32,8 @@
 //! ([`with_reference_ops`]): the same steps as before the fast kernels, for a three-way
 //! comparison (`bench/compare.py --candle-baseline`).
 //!
-//! When any GAN case is selected, candle's second-order gradients are enabled for the whole
-//! run before the first case ([`enable_second_order_gradients`]), as the GAN trainer runs:
-//! the R1 penalty needs them. The report's `second_order_gradients` says whether they were on.
+//! As in the GAN trainer, only R1's inner backward pass keeps the graph of its gradients
+//! (`backward_keeping_graph`); every other backward pass detaches them.
 
 use std::io::Write;
 use std::time::Instant;
@@ -54,7 +53,6 @@ use photomat_generator::fir::upsample2d;
 use photomat_generator::modulated_conv::modulated_conv2d;
 use photomat_generator::padding::Padding;
 use photomat_generator::train::config::default_r1_gamma;
-use photomat_generator::train::enable_second_order_gradients;
 use photomat_generator::train::loss::{discriminator_loss, generator_loss, r1_loss};
 use photomat_generator::{
     Discriminator, GanModel, GeneratorConfig, NoiseInput, parameter_count, seeded_var_builder,
@@ -178,11 +176,6 @@ impl Case {
         }
     }
 
-    /// Whether the case trains or samples the GAN (and so runs as the GAN trainer does).
-    fn is_gan(self) -> bool {
-        matches!(self, Case::GStep | Case::DStep | Case::DR1)
-    }
-
     /// (kernel, stride, padding) of the convolution cases.
     fn conv_shape(self) -> Option<(usize, usize, usize)> {
         match self {
@@ -270,7 +263,6 @@ struct Report {
     batch: usize,
     iters: usize,
     warmup: usize,
-    second_order_gradients: bool,
     /// Whether the kernels ran on their candle reference path (`--candle-reference`).
     reference_ops: bool,
     parameters: Parameters,
@@ -625,17 +617,8 @@ fn time_case(
     .with_context(|| format!("benchmark case {} failed", case.name()))
 }
 
-/// Whether candle keeps the graph of gradients: `CANDLE_GRAD_DO_NOT_DETACH` set, non-empty and
-/// not "0" (candle 0.11's own reading of the variable, `backprop.rs`).
-fn second_order_gradients() -> bool {
-    std::env::var("CANDLE_GRAD_DO_NOT_DETACH").is_ok_and(|v| !v.is_empty() && v != "0")
-}
-
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     validate(args)?;
-    if args.cases.iter().any(|c| c.is_gan()) {
-        enable_second_order_gradients();
-    }
     let setup = Setup::new(args).context("cannot build the benchmark's networks")?;
     let total = (args.cases.len() * (args.iters + args.warmup)) as u64;
     let bar = ProgressBar::new(total).with_style(
@@ -659,7 +642,6 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         batch: args.batch,
         iters: args.iters,
         warmup: args.warmup,
-        second_order_gradients: second_order_gradients(),
         reference_ops: args.candle_reference,
         parameters: setup.parameters,
         cases,
@@ -728,7 +710,6 @@ mod tests {
             35 * 64 + 6 * 64 * 64 + 64 * 3 + 7 * 64 + 3
         );
         assert_eq!(report["parameters"]["g_buffers"], 512);
-        assert_eq!(report["second_order_gradients"], true);
         assert_eq!(report["reference_ops"], false);
 
         // The plain-candle baseline runs the same steps.

@@ -36,7 +36,7 @@ use super::data::TrainingData;
 use super::log::{LogRow, TrainLog};
 use super::samples::sample_grid;
 use super::state::{CONFIG_FILE, LOG_FILE, Restored, STATE_FILE, read_config};
-use super::trainer::{PhaseSeconds, StepStats, Trainer, enable_second_order_gradients};
+use super::trainer::{PhaseSeconds, StepStats, Trainer};
 use crate::relight::DEFAULT_RELIGHT_LOBES;
 use crate::swd::{FakeWindows, SwdConfig, SwdReport, model_swd};
 use crate::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION, SpatialConfig};
@@ -415,8 +415,6 @@ impl GanTraining {
     /// past its last checkpoint; the resumed run makes them again). Temporary files of a
     /// killed checkpoint are removed.
     pub fn open(run: &Path, plan: RunPlan, total: u64, device: &Device) -> anyhow::Result<Self> {
-        // Before any backward pass of this thread (the R1 penalty is a double backward).
-        enable_second_order_gradients();
         let lock = FolderLock::acquire(run, "photomat train-gan")?;
         let mut trainer = Trainer::new(plan.config, device)?;
         let log_path = run.join(LOG_FILE);

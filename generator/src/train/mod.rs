@@ -34,6 +34,4 @@ pub use driver::{
     GanEvent, GanOutcome, GanSettings, GanTraining, RunLength, RunPlan, SNAPSHOTS_DIR,
     snapshot_folder, snapshot_folders,
 };
-pub use trainer::{
-    PhaseSeconds, StepStats, Trainer, enable_second_order_gradients, fresh_discriminator,
-};
+pub use trainer::{PhaseSeconds, StepStats, Trainer, fresh_discriminator};

@@ -9,9 +9,8 @@
 //! R1) asks a fixed-size step in w to change the image by a fixed amount in every direction,
 //! which smooths the mapping from w to images.
 //!
-//! `g` must keep its graph (a double backward): candle does so only with
-//! `CANDLE_GRAD_DO_NOT_DETACH=1` ([`super::enable_second_order_gradients`]); a detached
-//! gradient is reported as an error.
+//! `g` keeps its graph (a double backward): it comes from candle's `backward_keeping_graph`
+//! (`docs/candle-notes.md`, "Second-order gradients").
 
 use candle_core::{DType, Device, Result, Tensor, Var, bail};
 use photomat_core::rng::SplitMix64;
@@ -44,17 +43,10 @@ pub fn pl_noise(shape: (usize, usize, usize, usize), seed: u64, device: &Device)
 /// # Shapes
 /// images (B, C, H, W) computed from ws (B, L, D), noise like images → (B).
 pub fn path_lengths(images: &Tensor, ws: &Tensor, noise: &Tensor) -> Result<Tensor> {
-    let grads = (images * noise)?.sum_all()?.backward()?;
+    let grads = (images * noise)?.sum_all()?.backward_keeping_graph()?;
     let Some(g) = grads.get(ws) else {
         bail!("path length: the images do not depend on ws");
     };
-    if !g.track_op() {
-        bail!(
-            "path length: candle detached the gradient with respect to ws, so the penalty would \
-             have no gradient; set CANDLE_GRAD_DO_NOT_DETACH=1 in the environment before the \
-             thread's first backward()"
-        );
-    }
     // √ of a sum of squares: its derivative is unbounded only where every component of g
     // vanishes, which a generator whose images depend on w does not reach (as in StyleGAN2).
     g.sqr()?.sum(2)?.mean(1)?.sqrt()

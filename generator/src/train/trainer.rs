@@ -30,11 +30,9 @@
 //! SplitMix64. With the same seed two runs produce identical weights on the CPU, and a run
 //! resumed from [`Trainer::save_state`] continues exactly as the uninterrupted one.
 //!
-//! The R1 penalty is a double backward, which candle computes only when the environment has
-//! `CANDLE_GRAD_DO_NOT_DETACH=1` before the thread's first `backward()` (measured on candle
-//! 0.11); see
-//! [`enable_second_order_gradients`]. Without it the first R1 step fails with an error naming
-//! the variable.
+//! The R1 and path-length penalties are double backwards: their inner pass keeps the graph of
+//! its gradients (`backward_keeping_graph`, `docs/candle-notes.md`, "Second-order
+//! gradients"); every other backward pass detaches them, which keeps a D step 5 % faster.
 
 use std::path::Path;
 use std::time::Instant;
@@ -56,17 +54,6 @@ use super::state::{Restored, load_state, save_state};
 use super::streams::{Stream, stream_seed, stream_seeds};
 use crate::model_files::G_PREFIX;
 use crate::{Discriminator, GanModel, NoiseInput, is_buffer, mix_styles, seeded_var_builder};
-
-/// Sets `CANDLE_GRAD_DO_NOT_DETACH=1` so that candle keeps the graph of gradients (needed by
-/// the R1 penalty's double backward). Call it at the start of the program, before any thread
-/// runs a `backward()` (candle reads it once per thread) and before other threads exist:
-/// changing the environment is only sound while no other thread reads it.
-pub fn enable_second_order_gradients() {
-    if std::env::var_os("CANDLE_GRAD_DO_NOT_DETACH").is_none() {
-        // SAFETY: documented precondition: called before other threads are started.
-        unsafe { std::env::set_var("CANDLE_GRAD_DO_NOT_DETACH", "1") };
-    }
-}
 
 /// What one step measured.
 #[derive(Debug, Clone, PartialEq)]

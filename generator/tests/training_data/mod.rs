@@ -1,12 +1,7 @@
-//! What the GAN trainer's tests (`train.rs`, `train_spatial.rs`) share: second-order
-//! gradients switched on once per test binary, a tiny simulated data set, and snapshots of
-//! a run's state for bit-identity checks.
-//!
-//! The R1 penalty is a double backward: every test first sets `CANDLE_GRAD_DO_NOT_DETACH=1`
-//! through one `Once`, so the variable is written before any test thread reads it.
+//! What the GAN trainer's tests (`train.rs`, `train_spatial.rs`) share: a tiny simulated data
+//! set, and snapshots of a run's state for bit-identity checks.
 
 use std::path::{Path, PathBuf};
-use std::sync::Once;
 
 use anyhow::Result;
 use candle_nn::VarMap;
@@ -17,15 +12,6 @@ use photomat_data::procedural::families;
 use photomat_data::simulator::{
     CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, SimulationConfig, simulate,
 };
-use photomat_generator::train::enable_second_order_gradients;
-
-static ENV: Once = Once::new();
-
-/// Second-order gradients for this test binary (before any backward pass).
-pub fn second_order() {
-    ENV.call_once(enable_second_order_gradients);
-}
-
 /// `count` simulated photos of 64² of every family (PNG, seeded), prepared at 64² in
 /// `dir/data`; returns the data set folder.
 pub fn simulated_dataset(dir: &Path, count: usize, seed: u64) -> Result<PathBuf> {

@@ -17,13 +17,32 @@ fn broadcast_back(arg: &Tensor, node: &Tensor, reduced_dims: &[usize]) -> Result
 }
 
 thread_local! {
-    static CANDLE_GRAD_DO_NOT_DETACH: bool = {
-        match std::env::var("CANDLE_GRAD_DO_NOT_DETACH") {
+    // photomat patch: a `Cell`, so that `backward_keeping_graph` can switch it for one pass.
+    static CANDLE_GRAD_DO_NOT_DETACH: std::cell::Cell<bool> = {
+        std::cell::Cell::new(match std::env::var("CANDLE_GRAD_DO_NOT_DETACH") {
             Ok(s) => {
                 !s.is_empty() && s != "0"
             },
             Err(_) => false,
-        }
+        })
+    }
+}
+
+/// photomat patch: whether the backward pass running on this thread keeps the graph of the
+/// gradients it computes (`Tensor::backward_keeping_graph`, or `CANDLE_GRAD_DO_NOT_DETACH`
+/// set for the thread). A custom op's `bwd` reads it to know whether its backward may itself
+/// be differentiated.
+pub fn keeps_graph() -> bool {
+    CANDLE_GRAD_DO_NOT_DETACH.with(|b| b.get())
+}
+
+/// Restores the thread's detach setting when a `backward_keeping_graph` pass ends, also by
+/// an error or a panic.
+struct RestoreDetach(bool);
+
+impl Drop for RestoreDetach {
+    fn drop(&mut self) {
+        CANDLE_GRAD_DO_NOT_DETACH.with(|b| b.set(self.0));
     }
 }
 
@@ -162,6 +181,16 @@ impl Tensor {
         nodes
     }
 
+    /// photomat patch: `backward`, keeping the graph of every gradient it computes (PyTorch's
+    /// `create_graph=True`) whatever `CANDLE_GRAD_DO_NOT_DETACH` says, so that a function of
+    /// the gradients (an R1 or path-length penalty) can be differentiated again. Other
+    /// backward passes on the thread keep detaching: the graph of gradients costs time and
+    /// memory that a first-order pass does not need.
+    pub fn backward_keeping_graph(&self) -> Result<GradStore> {
+        let _restore = RestoreDetach(CANDLE_GRAD_DO_NOT_DETACH.with(|b| b.replace(true)));
+        self.backward()
+    }
+
     pub fn backward(&self) -> Result<GradStore> {
         let sorted_nodes = self.sorted_nodes();
         let mut grads = GradStore::new();
@@ -186,7 +215,7 @@ impl Tensor {
             // do not have to allocate too often. Here we just call `.detach` to avoid computing
             // the backprop graph of the backprop itself. This would be an issue for second order
             // derivatives but these are out of scope at the moment.
-            let do_not_detach = CANDLE_GRAD_DO_NOT_DETACH.with(|b| *b);
+            let do_not_detach = CANDLE_GRAD_DO_NOT_DETACH.with(|b| b.get());
             let grad = if do_not_detach { grad } else { grad.detach() };
             if let Some(op) = node.op() {
                 match op {
@@ -783,7 +812,7 @@ impl GradStore {
                 Entry::Occupied(mut entry) => {
                     let new_grad = entry.get().add(&grad)?;
 
-                    let do_not_detach = CANDLE_GRAD_DO_NOT_DETACH.with(|b| *b);
+                    let do_not_detach = CANDLE_GRAD_DO_NOT_DETACH.with(|b| b.get());
                     let new_grad = if do_not_detach {
                         new_grad
                     } else {
