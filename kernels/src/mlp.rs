@@ -582,6 +582,41 @@ fn mask<T: WithDType>(x: &mut [T], h: &[T], act: MlpActivation) {
     }
 }
 
+/// Folds `items` in order into one task state per fixed run of consecutive items (as many runs
+/// as rayon has threads), then adds the runs' sums (`sums` of each state) in run order. The
+/// parameter gradients then depend on the thread count only, not on which thread took which
+/// block: with rayon's `fold` + `reduce` the grouping followed work stealing, and two training
+/// runs with the same seed drifted apart in the last bits from their fourth step on.
+fn sum_over_runs<I: Send, S, T: WithDType>(
+    items: Vec<I>,
+    new_state: impl Fn() -> S + Sync + Send,
+    fold: impl Fn(S, I) -> S + Sync + Send,
+    sums: impl Fn(S) -> Vec<T> + Sync + Send,
+) -> Vec<T> {
+    let per = items.len().div_ceil(rayon::current_num_threads()).max(1);
+    // At least one run, so that no items still give the state's zero sums.
+    let mut runs: Vec<Vec<I>> = vec![Vec::new()];
+    for item in items {
+        if runs[runs.len() - 1].len() == per {
+            runs.push(Vec::new());
+        }
+        let last = runs.len() - 1;
+        runs[last].push(item);
+    }
+    let partials: Vec<Vec<T>> = runs
+        .into_par_iter()
+        .map(|run| sums(run.into_iter().fold(new_state(), &fold)))
+        .collect();
+    let mut partials = partials.into_iter();
+    let mut total = partials.next().unwrap_or_default();
+    for part in partials {
+        for (a, b) in total.iter_mut().zip(part) {
+            *a += b;
+        }
+    }
+    total
+}
+
 /// Runs `f` over the blocks with their chunks of `saved`, on rayon's pool.
 fn for_blocks<T: Send, S: Send>(
     items: Vec<(Block, &mut [T])>,
@@ -1033,19 +1068,7 @@ impl Backward {
         } else {
             (0..blocks.len()).map(|i| (i, None)).collect()
         };
-        let acc = items
-            .into_par_iter()
-            .fold(new_task, fold)
-            .map(|t| t.acc)
-            .reduce(
-                || vec![T::zero(); np],
-                |mut a, b| {
-                    for (a, b) in a.iter_mut().zip(b) {
-                        *a += b;
-                    }
-                    a
-                },
-            );
+        let acc = sum_over_runs(items, new_task, fold, |t| t.acc);
         let dparams = &mut out[total_in..];
         for i in 0..l {
             let (wo, bo) = net.offsets(i);
@@ -1266,22 +1289,11 @@ impl SecondOrder {
             }
             scatter.put(&[io.output], &[0], blk, dl, &t.ulast[..len * dl], None);
         };
-        let acc = (0..blocks.len())
-            .into_par_iter()
-            .fold(new_task, |mut t, bi| {
-                block(&mut t, bi);
-                t
-            })
-            .map(|t| t.acc)
-            .reduce(
-                || vec![T::zero(); np],
-                |mut a, b| {
-                    for (a, b) in a.iter_mut().zip(b) {
-                        *a += b;
-                    }
-                    a
-                },
-            );
+        let fold = |mut t: Task<T>, bi: usize| {
+            block(&mut t, bi);
+            t
+        };
+        let acc = sum_over_runs((0..blocks.len()).collect(), new_task, fold, |t| t.acc);
         let dparams = &mut out[io.output_len()..];
         for i in 0..l {
             let (wo, _) = net.offsets(i);
@@ -1409,6 +1421,47 @@ mod tests {
             assert!(
                 d <= tol * scale,
                 "{what}, output {j}: |Δ| {d}, scale {scale}"
+            );
+        }
+        Ok(())
+    }
+
+    /// The parameter gradients sum over blocks of texels on several threads: they must come out
+    /// the same, to the bit, every time (a training run must repeat, and a resumed one continue
+    /// exactly), whichever thread takes which block.
+    #[test]
+    fn parameter_gradients_do_not_depend_on_thread_timing() -> Result<()> {
+        let dev = Device::Cpu;
+        let dims = [7, 16, 16, 3];
+        let params = layers(&dims, 1, DType::F32)?;
+        // 4·48·48 = 9216 texels: 36 blocks over 4 threads.
+        let f = pseudo_random((4, 4, 48, 48), 2, DType::F32, &dev)?;
+        let om = pseudo_random((4, 3, 48, 48), 3, DType::F32, &dev)?;
+        let r = pseudo_random((4, 3, 48, 48), 4, DType::F32, &dev)?;
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(4)
+            .build()
+            .expect("a pool");
+        let grads = || -> Result<Vec<Vec<f32>>> {
+            let y = per_texel_mlp(&f, &om, &views(&params), ACT)?;
+            let store = (y * &r)?.sum_all()?.backward()?;
+            params
+                .iter()
+                .flat_map(|(w, b, _, _)| [w, b])
+                .map(|v| {
+                    store
+                        .get(v.as_tensor())
+                        .expect("a gradient")
+                        .flatten_all()?
+                        .to_vec1()
+                })
+                .collect()
+        };
+        let first = pool.install(grads)?;
+        for _ in 0..20 {
+            assert!(
+                pool.install(grads)? == first,
+                "gradients differ between runs"
             );
         }
         Ok(())
