@@ -812,7 +812,10 @@ pub(crate) fn apply_weight_grad(g: Geometry, x: &Tensor, dy: &Tensor) -> Result<
 /// candle asks a custom op for both operands' gradients, and drops those of operands outside
 /// the graph (a constant input such as the estimator's neural material, or a frozen layer's
 /// weights), so each of those would be a convolution's worth of work thrown away.
-fn needed(operand: &Tensor, grad: impl FnOnce() -> Result<Tensor>) -> Result<Option<Tensor>> {
+pub(crate) fn needed(
+    operand: &Tensor,
+    grad: impl FnOnce() -> Result<Tensor>,
+) -> Result<Option<Tensor>> {
     operand.track_op().then(grad).transpose()
 }
 

@@ -809,6 +809,7 @@ impl Forward {
             hidden,
             inputs: inputs.iter().map(|t| (*t).clone()).collect(),
             save_dz: candle_core::backprop::keeps_graph(),
+            params_needed: params.track_op(),
             saved_dz: Mutex::new(None),
         };
         let packed = grad.contiguous()?.apply_op2(params, op)?;
@@ -863,7 +864,7 @@ impl CustomOp3 for Forward {
         let (mut g, dp) = self.backward(&[a, b], p, grad)?;
         let db = g.pop();
         let da = g.pop();
-        Ok((da, db, Some(dp)))
+        Ok((da, db, p.track_op().then_some(dp)))
     }
 }
 
@@ -890,7 +891,7 @@ impl CustomOp2 for Forward {
         grad: &Tensor,
     ) -> Result<(Option<Tensor>, Option<Tensor>)> {
         let (mut g, dp) = self.backward(&[a], p, grad)?;
-        Ok((g.pop(), Some(dp)))
+        Ok((g.pop(), p.track_op().then_some(dp)))
     }
 }
 
@@ -903,6 +904,9 @@ struct Backward {
     hidden: Arc<CpuStorage>,
     inputs: Vec<Tensor>,
     save_dz: bool,
+    /// Whether the parameters are in the graph: when they are constants (a frozen M, as when
+    /// a photo is inverted) their gradient stays zero instead of being computed.
+    params_needed: bool,
     /// Every block's dzᵢ, i < L − 1 (laid out as the activations), for the second-order op.
     saved_dz: Mutex<Option<Arc<CpuStorage>>>,
 }
@@ -1004,19 +1008,21 @@ impl Backward {
                 } else {
                     (&dz[(i % ns) * sl..(i % ns + 1) * sl], None)
                 };
-                // dŴᵢ += dzᵢᵀ·hᵢ₋₁, db̂ᵢ += Σ_rows dzᵢ.
-                matmul(
-                    (outw, inw, len),
-                    &mut t.acc[wo..wo + outw * inw],
-                    true,
-                    cur,
-                    (1, outw),
-                    prev,
-                    (inw, 1),
-                );
-                for row in cur.chunks_exact(outw) {
-                    for (a, &v) in t.acc[bo..bo + outw].iter_mut().zip(row) {
-                        *a += v;
+                // dŴᵢ += dzᵢᵀ·hᵢ₋₁, db̂ᵢ += Σ_rows dzᵢ (unless the parameters are constants).
+                if self.params_needed {
+                    matmul(
+                        (outw, inw, len),
+                        &mut t.acc[wo..wo + outw * inw],
+                        true,
+                        cur,
+                        (1, outw),
+                        prev,
+                        (inw, 1),
+                    );
+                    for row in cur.chunks_exact(outw) {
+                        for (a, &v) in t.acc[bo..bo + outw].iter_mut().zip(row) {
+                            *a += v;
+                        }
                     }
                 }
                 // dhᵢ₋₁ = dzᵢ·Ŵᵢ, then the activation's derivative.
@@ -1423,6 +1429,43 @@ mod tests {
                 "{what}, output {j}: |Δ| {d}, scale {scale}"
             );
         }
+        Ok(())
+    }
+
+    /// With constant parameters (a frozen M) the inputs' gradients are those of the full
+    /// backward pass, and the parameters get none.
+    #[test]
+    fn a_frozen_mlp_passes_the_same_input_gradients() -> Result<()> {
+        let dev = Device::Cpu;
+        let params = layers(&[7, 16, 16, 3], 5, DType::F64)?;
+        let f = Var::from_tensor(&pseudo_random((2, 4, 17, 19), 6, DType::F64, &dev)?)?;
+        let om = pseudo_random((2, 3, 17, 19), 7, DType::F64, &dev)?;
+        let r = pseudo_random((2, 3, 17, 19), 8, DType::F64, &dev)?;
+        let y = per_texel_mlp(f.as_tensor(), &om, &views(&params), ACT)?;
+        let full = (y * &r)?.sum_all()?.backward()?;
+        let frozen: Vec<(Tensor, Tensor)> = params
+            .iter()
+            .map(|(w, b, _, _)| (w.as_tensor().detach(), b.as_tensor().detach()))
+            .collect();
+        let views: Vec<MlpLayer<'_>> = frozen
+            .iter()
+            .zip(&params)
+            .map(|((w, b), (_, _, g, bg))| MlpLayer {
+                weight: w,
+                bias: b,
+                weight_gain: *g,
+                bias_gain: *bg,
+            })
+            .collect();
+        let y = per_texel_mlp(f.as_tensor(), &om, &views, ACT)?;
+        let store = (y * &r)?.sum_all()?.backward()?;
+        let df = store.get(f.as_tensor()).expect("an input gradient");
+        assert!(max_abs_diff(df, full.get(f.as_tensor()).expect("df"))? < 1e-12);
+        assert!(
+            params
+                .iter()
+                .all(|(w, _, _, _)| store.get(w.as_tensor()).is_none())
+        );
         Ok(())
     }
 

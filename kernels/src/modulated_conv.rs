@@ -32,7 +32,7 @@ use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor, WithDTyp
 use crate::alloc::output_buffer;
 use crate::conv::{
     Conv2dSpec, Geometry, apply_input_grad, apply_weight_grad, contiguous, conv2d_reference,
-    expect_shape, fast_path, forward_into,
+    expect_shape, fast_path, forward_into, needed,
 };
 use crate::plane_ops::{map_planes, plane_dot, scale_planes, scale_planes_in_place};
 
@@ -172,15 +172,24 @@ impl CustomOp3 for ModulatedConv {
         } else {
             (grad.clone(), None)
         };
-        let gx = apply_input_grad(self.g, &gd, w)?;
-        let dx = scale_planes(&gx, &s)?;
-        let ds = plane_dot(&gx, x)?;
-        let dw = apply_weight_grad(self.g, &scale_planes(x, &s)?, &gd)?;
-        let dscales = match d {
-            Some(d) => Tensor::cat(&[ds, plane_dot(grad, y)?.div(&d)?], 1)?,
-            None => ds,
+        // The input gradient of the plain conv feeds both x's and the input scales' gradients;
+        // each gradient is computed only when its operand is in the graph (`needed`: a frozen
+        // generator's weights when a photo is inverted, say).
+        let gx = if x.track_op() || scales.track_op() {
+            Some(apply_input_grad(self.g, &gd, w)?)
+        } else {
+            None
         };
-        Ok((Some(dx), Some(dw), Some(dscales)))
+        let dx = needed(x, || scale_planes(gx.as_ref().expect("gx"), &s))?;
+        let dw = needed(w, || apply_weight_grad(self.g, &scale_planes(x, &s)?, &gd))?;
+        let dscales = needed(scales, || {
+            let ds = plane_dot(gx.as_ref().expect("gx"), x)?;
+            match &d {
+                Some(d) => Tensor::cat(&[ds, plane_dot(grad, y)?.div(d)?], 1),
+                None => Ok(ds),
+            }
+        })?;
+        Ok((dx, dw, dscales))
     }
 }
 
@@ -215,6 +224,39 @@ mod tests {
             out.push(store.get(v.as_tensor()).cloned().expect("a gradient"));
         }
         Ok(out)
+    }
+
+    /// Each operand's gradient is computed only when it is in the graph: with the weights or
+    /// the input constant, the others' gradients are the full backward's, and the constant
+    /// gets none.
+    #[test]
+    fn constant_operands_get_no_gradient_and_the_others_the_full_ones() -> Result<()> {
+        let dev = Device::Cpu;
+        let spec = Conv2dSpec::zeros(1, 1);
+        let x = Var::from_tensor(&pseudo_random((2, 3, 5, 6), 1, DType::F64, &dev)?)?;
+        let w = Var::from_tensor(&pseudo_random((4, 3, 3, 3), 2, DType::F64, &dev)?)?;
+        let s = Var::from_tensor(&((pseudo_random((2, 7), 3, DType::F64, &dev)? * 0.5)? + 1.0)?)?;
+        let g = pseudo_random((2, 4, 5, 6), 4, DType::F64, &dev)?;
+        let full = grads(modulated_conv2d, [&x, &w, &s], &g, true, spec)?;
+        for frozen in [1, 0] {
+            let t = |i: usize, v: &Var| {
+                if i == frozen {
+                    v.as_tensor().detach()
+                } else {
+                    v.as_tensor().clone()
+                }
+            };
+            let (xt, wt) = (t(0, &x), t(1, &w));
+            let y = modulated_conv2d(&xt, &wt, s.as_tensor(), true, spec)?;
+            let store = (&y * &g)?.sum_all()?.backward()?;
+            for (i, v) in [&x, &w, &s].into_iter().enumerate() {
+                match store.get(v.as_tensor()) {
+                    Some(d) => assert!(max_abs_diff(d, &full[i + 1])? < 1e-12, "operand {i}"),
+                    None => assert_eq!(i, frozen, "operand {i} lost its gradient"),
+                }
+            }
+        }
+        Ok(())
     }
 
     #[test]
