@@ -28,7 +28,7 @@ import models  # noqa: E402
 
 #: name -> what it measures (same text as the Rust side's case table).
 CASES = {
-    "g_step": "G+M forward, D on the fakes, softplus(-D) loss, backward (G, M and D gradients)",
+    "g_step": "G+M forward, frozen D on the fakes, softplus(-D) loss, backward (G and M gradients)",
     "d_step": "D forward on fake+real images, logistic loss, backward to D (no R1)",
     "d_r1": "R1 penalty (D forward, input gradient with graph, squared norm), backward to D",
     "e_step": "E forward, height(ggx) decode, flash render, 0.1*L1 to M's image, backward to E",
@@ -149,14 +149,15 @@ class Bench:
         """(step function, FLOPs per step or None)."""
         r, b = self.a.size, self.a.batch
         if name == "g_step":
-            # D's weights keep requires_grad, as photomat's trainer (its D weights are Vars in
-            # the G phase's graph); StyleGAN2-ADA freezes D here, saving its weight gradients.
+            # Gradients of G's and M's parameters only: D is frozen in the G phase, as in
+            # StyleGAN2-ADA and photomat's trainer (D's input gradients, no weight gradients).
+            g_m = list(self.g.parameters()) + list(self.m.parameters())
 
             def step():
                 self._clear(self.g, self.m, self.d)
                 f = self.g(self.z, self.noise)
                 logits = self.d(self.m(f, self.omega), self.omega)
-                F.softplus(-logits).mean().backward()
+                F.softplus(-logits).mean().backward(inputs=g_m)
             return step, None
         if name == "d_step":
 

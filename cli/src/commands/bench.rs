@@ -8,7 +8,7 @@
 //!
 //! | case | what one iteration is |
 //! |---|---|
-//! | `g_step` | G + M forward, D on the fakes, `softplus(−D)` loss, backward (the trainer's G phase) |
+//! | `g_step` | G + M forward, frozen D on the fakes, `softplus(−D)` loss, backward (the trainer's G phase) |
 //! | `d_step` | D on fakes and reals, logistic loss, backward (the trainer's D phase, no R1) |
 //! | `d_r1` | R1 penalty (D forward, input gradient with its graph, squared norm), backward |
 //! | `e_step` | E forward, `height(ggx)` decode, flash render, 0.1·L1 to M's image, backward |
@@ -21,7 +21,8 @@
 //! | `sgemm` | one 1024² × 1024² f32 matmul: the GEMM ceiling of this machine |
 //!
 //! Every backward is taken of a scalar and produces the gradients of every parameter in the
-//! graph (D's included in `g_step`, as photomat's trainer computes them); no optimiser update
+//! graph (`g_step` judges the fakes with D's weights as constants, as the trainer's G phase
+//! does, so not D's); no optimiser update
 //! is timed. Inputs (latents, noise images, fakes, reals, lights) are drawn once, seeded,
 //! outside the timed region. Each case runs `--warmup` untimed iterations and `--iters` timed
 //! ones, in its own thread; the report holds every time, the median (the middle value, the
@@ -58,6 +59,7 @@ use photomat_generator::{
     Discriminator, GanModel, GeneratorConfig, NoiseInput, parameter_count, seeded_var_builder,
 };
 use photomat_kernels::{Conv2dSpec, conv2d, with_reference_ops};
+use photomat_train::varmap::frozen_var_builder;
 use serde::Serialize;
 
 /// BRDF model of the estimator cases: the paper's configuration (n = 8).
@@ -148,7 +150,7 @@ impl Case {
     pub fn what(self) -> &'static str {
         match self {
             Case::GStep => {
-                "G+M forward, D on the fakes, softplus(-D) loss, backward (G, M and D gradients)"
+                "G+M forward, frozen D on the fakes, softplus(-D) loss, backward (G and M gradients)"
             }
             Case::DStep => "D forward on fake+real images, logistic loss, backward to D (no R1)",
             Case::DR1 => {
@@ -273,6 +275,8 @@ struct Report {
 struct Setup {
     gan: GanModel,
     d: Discriminator,
+    /// D with its weights as constants (the trainer's G phase).
+    d_frozen: Discriminator,
     e: EstimatorModel,
     brdf: Brdf,
     /// Flash geometry of the batch's highlights and of the centred flash (batch 1).
@@ -305,6 +309,7 @@ impl Setup {
             &cfg,
             seeded_var_builder(&d_vars, args.seed ^ 1, DType::F32, &dev),
         )?;
+        let d_frozen = Discriminator::new(&cfg, frozen_var_builder(&d_vars, DType::F32, &dev))?;
         let brdf = lookup(BRDF)?;
         let e = EstimatorModel::new(
             brdf.clone(),
@@ -347,6 +352,7 @@ impl Setup {
         Ok(Self {
             gan,
             d,
+            d_frozen,
             e,
             brdf,
             lights,
@@ -381,7 +387,7 @@ fn step<'a>(
         Case::GStep => (
             Box::new(move || {
                 let f = g.forward(&s.z, 1.0, &NoiseInput::Given(&s.noise))?;
-                let logits = s.d.forward(&m.forward(&f, omega)?, omega)?;
+                let logits = s.d_frozen.forward(&m.forward(&f, omega)?, omega)?;
                 drop(generator_loss(&logits)?.backward()?);
                 Ok(())
             }),

@@ -40,7 +40,7 @@ use std::time::Instant;
 use candle_core::{DType, Device, Result, Tensor, Var};
 use candle_nn::VarMap;
 use photomat_core::rng::SplitMix64;
-use photomat_train::varmap::{insert_renamed, insert_var};
+use photomat_train::varmap::{frozen_var_builder, insert_renamed, insert_var};
 use photomat_train::{
     Adam, NanGuard, gradients_finite, roll_offsets, roll_per_sample, window_per_sample,
 };
@@ -420,6 +420,13 @@ impl Trainer {
         Ok(Fakes { images, omega, w })
     }
 
+    /// D with the current weights as constant tensors (sharing the variables' storage, so
+    /// building it copies no weights).
+    fn frozen_discriminator(&self) -> Result<Discriminator> {
+        let vb = frozen_var_builder(&self.d_vars, DType::F32, &self.device);
+        Discriminator::new(&self.config.generator, vb)
+    }
+
     /// Runs one training step (module docs) on `data`. Errors: data or numerical failures,
     /// and [`NanGuard`]'s stop after `nan_limit` consecutive skipped steps.
     pub fn step(&mut self, data: &dyn TrainingData) -> Result<StepStats> {
@@ -435,9 +442,13 @@ impl Trainer {
             t
         };
 
-        // 1. G and M.
+        // 1. G and M, judged by D with its weights as constants: this phase steps G and M
+        // only, so D's weight gradients would be thrown away (StyleGAN2-ADA freezes D here
+        // too); D's convolutions then compute input gradients alone.
         let fakes = self.generate(Phase::G, step, b, None, data)?;
-        let logits = self.d.forward(&fakes.images, &fakes.omega)?;
+        let logits = self
+            .frozen_discriminator()?
+            .forward(&fakes.images, &fakes.omega)?;
         let loss = generator_loss(&logits)?;
         let loss_g = scalar(&loss)?;
         let grads = loss.backward()?;
