@@ -106,10 +106,14 @@ pub(crate) fn forward(g: &Geometry, x: &[f32], w: &[f32], y: &mut [f32], threads
         supports_forward(g),
         "direct conv: unsupported geometry {g:?}"
     );
-    let packed = pack_weights(g.co, g.k(), |o, dst| {
+    run(g, x, &pack_forward(g, w), y, threads);
+}
+
+/// The forward's weights (C_out·C_in·kh·kw) in tile order ([`pack_weights`]).
+fn pack_forward(g: &Geometry, w: &[f32]) -> Vec<f32> {
+    pack_weights(g.co, g.k(), |o, dst| {
         dst.copy_from_slice(&w[o * g.k()..][..g.k()])
-    });
-    run(g, x, &packed, y, threads);
+    })
 }
 
 /// Input gradient: writes every element of `dx` (B·C_in·H·W) from `dy` (B·C_out·H_out·W_out)
@@ -906,9 +910,7 @@ mod tests {
                     x.flatten_all()?.to_vec1::<f32>()?,
                     wt.flatten_all()?.to_vec1::<f32>()?,
                 );
-                let packed = pack_weights(g.co, g.k(), |o, dst| {
-                    dst.copy_from_slice(&wv[o * g.k()..][..g.k()])
-                });
+                let packed = pack_forward(&g, &wv);
                 let mut whole = vec![f32::NAN; g.y_shape().elem_count()];
                 run_in_bands(&g, &xv, &packed, &mut whole, 16);
                 let mut banded = vec![f32::NAN; g.y_shape().elem_count()];

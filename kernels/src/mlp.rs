@@ -1398,6 +1398,25 @@ mod tests {
             .collect()
     }
 
+    /// The layers' weights and biases as constant tensors (outside any graph), with their gains.
+    fn detached(l: &[(Var, Var, f64, f64)]) -> Vec<(Tensor, Tensor, f64, f64)> {
+        l.iter()
+            .map(|(w, b, g, bg)| (w.as_tensor().detach(), b.as_tensor().detach(), *g, *bg))
+            .collect()
+    }
+
+    /// [`views`] of [`detached`] layers.
+    fn constant_views(l: &[(Tensor, Tensor, f64, f64)]) -> Vec<MlpLayer<'_>> {
+        l.iter()
+            .map(|(w, b, g, bg)| MlpLayer {
+                weight: w,
+                bias: b,
+                weight_gain: *g,
+                bias_gain: *bg,
+            })
+            .collect()
+    }
+
     /// Output and the gradients of `Σ y ⊙ r` with respect to every input and parameter.
     fn value_and_grads(
         y: &Tensor,
@@ -1443,21 +1462,8 @@ mod tests {
         let r = pseudo_random((2, 3, 17, 19), 8, DType::F64, &dev)?;
         let y = per_texel_mlp(f.as_tensor(), &om, &views(&params), ACT)?;
         let full = (y * &r)?.sum_all()?.backward()?;
-        let frozen: Vec<(Tensor, Tensor)> = params
-            .iter()
-            .map(|(w, b, _, _)| (w.as_tensor().detach(), b.as_tensor().detach()))
-            .collect();
-        let views: Vec<MlpLayer<'_>> = frozen
-            .iter()
-            .zip(&params)
-            .map(|((w, b), (_, _, g, bg))| MlpLayer {
-                weight: w,
-                bias: b,
-                weight_gain: *g,
-                bias_gain: *bg,
-            })
-            .collect();
-        let y = per_texel_mlp(f.as_tensor(), &om, &views, ACT)?;
+        let frozen = detached(&params);
+        let y = per_texel_mlp(f.as_tensor(), &om, &constant_views(&frozen), ACT)?;
         let store = (y * &r)?.sum_all()?.backward()?;
         let df = store.get(f.as_tensor()).expect("an input gradient");
         assert!(max_abs_diff(df, full.get(f.as_tensor()).expect("df"))? < 1e-12);
@@ -1563,20 +1569,8 @@ mod tests {
         let f = pseudo_random((2, 3, 20, 20), 4, DType::F32, &dev)?;
         let om = pseudo_random((2, 3, 20, 20), 5, DType::F32, &dev)?;
         // Plain tensors only: the forward keeps no activations, and still equals the reference.
-        let plain: Vec<(Tensor, Tensor)> = params
-            .iter()
-            .map(|(w, b, _, _)| (w.as_tensor().detach(), b.as_tensor().detach()))
-            .collect();
-        let l: Vec<MlpLayer<'_>> = plain
-            .iter()
-            .zip(&params)
-            .map(|((w, b), (_, _, g, bg))| MlpLayer {
-                weight: w,
-                bias: b,
-                weight_gain: *g,
-                bias_gain: *bg,
-            })
-            .collect();
+        let plain = detached(&params);
+        let l = constant_views(&plain);
         let fused = per_texel_mlp(&f, &om, &l, ACT)?;
         let reference = per_texel_mlp_reference(&f, &om, &l, ACT)?;
         // f32 sums of ≤ 38 O(1) terms per layer over 3 layers: ≈ 1e-6 relative.

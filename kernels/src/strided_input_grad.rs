@@ -199,13 +199,20 @@ fn run_in_bands(
     // The tasks write through raw pointers: the gradient must be exactly the batch's.
     assert_eq!(dx.len(), g.b * x_len, "direct conv: dx of the wrong size");
     assert_eq!(dy.len(), g.b * y_len, "direct conv: dy of the wrong size");
-    // (row phase, column phase, packed sub-kernel) of the s² phases, phase (r_y, r_x) at
-    // r_y · s + r_x.
-    let phases: Vec<(AxisPhase, AxisPhase, Vec<f32>)> = rows
+    let row = cols.len;
+    // (row phase, column phase, packed sub-kernel, tap offsets in the padded dy rows) of the
+    // s² phases, phase (r_y, r_x) at r_y · s + r_x.
+    type Phase = (AxisPhase, AxisPhase, Vec<f32>, Vec<usize>);
+    let phases: Vec<Phase> = rows
         .phases
         .iter()
         .flat_map(|&ry| cols.phases.iter().map(move |&rx| (ry, rx)))
-        .map(|(ry, rx)| (ry, rx, pack_phase(g, w, ry, rx)))
+        .map(|(ry, rx)| {
+            let taps = (0..ry.taps)
+                .flat_map(|t| (0..rx.taps).map(move |u| t * row + u))
+                .collect();
+            (ry, rx, pack_phase(g, w, ry, rx), taps)
+        })
         .collect();
     // A band of q rows reads padded dy rows q0 + lo .. q1 − 1 + hi.
     let lo = rows.phases.iter().map(|ph| ph.lead).min().unwrap_or(0);
@@ -220,7 +227,6 @@ fn run_in_bands(
     let nq = rows.phases[0].len;
     let bands = nq.div_ceil(band);
     let dx_addr = dx.as_mut_ptr() as usize;
-    let row = cols.len;
     // Floats of one phase's results: C_in planes of `band` rows of `row`.
     let phase_len = g.ci * band * row;
     let sx = cols.phases.len();
@@ -238,14 +244,11 @@ fn run_in_bands(
             let q1 = (q0 + band).min(nq);
             let dyi = &dy[i * y_len..(i + 1) * y_len];
             pad_band(g, (rows, cols), dyi, q0 + lo..q1 - 1 + hi, padded_rows, dyp);
-            for (p, (ry, rx, packed)) in phases.iter().enumerate() {
+            for (p, (ry, rx, packed, taps)) in phases.iter().enumerate() {
                 let count = q1.min(ry.len).saturating_sub(q0);
                 if count == 0 {
                     continue;
                 }
-                let taps: Vec<usize> = (0..ry.taps)
-                    .flat_map(|t| (0..rx.taps).map(move |u| t * row + u))
-                    .collect();
                 // The band's phase rows as one flat row with the padded rows' stride: texel
                 // qq·row + qx reads at the same offsets as (qq, qx), and the row − len_x
                 // texels after each row are computed and dropped. Phase rows of 17 or 33
@@ -253,7 +256,7 @@ fn run_in_bands(
                 let grid = TileGrid {
                     ci: g.co,
                     plane_in,
-                    taps: &taps,
+                    taps,
                     in_base: (ry.lead - lo) * row + rx.lead,
                     in_row: 0,
                     co: g.ci,
