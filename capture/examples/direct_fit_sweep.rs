@@ -6,12 +6,21 @@
 //! ```text
 //! cargo run --release -p photomat-capture --example direct_fit_sweep -- SET WARMUP[:FLAGS][,…] [FIRST COUNT [SIZE]]
 //! ```
+//! Columns: L1 photo is the fit's data term (display values, fitted gain and vignetting); L1
+//! input the linear render under the photo's flash against the photo, colour-scaled.
 //! WARMUP is [`CaptureOptions::warmup_steps`]; FLAGS: `v` fits the vignetting, `a` the
 //! ambient light, `u` holds
 //! specular and roughness uniform, `h` the height (flat normals), `f` runs every step at the
 //! full size (no coarse stage, [`CaptureOptions::full_size_steps`]), `d` captures at the
 //! default field of view (the photo's EXIF focal length, else a phone's 67°) instead of the
-//! true one. SIZE: the capture size
+//! true one, `k` holds the true diffuse, specular and roughness maps
+//! ([`CaptureOptions::known_maps`]: what one photo says of the relief when the reflectance is
+//! known), `s` weighs the smoothness prior 100× the default (0.2).
+//! The truth rows of a Mitsuba set also render the true maps with flat normals and with the
+//! relief scaled by ¼, ½ and ¾ (the normal's tilt scaled in slope), with their mean normal
+//! error: how close to the true relief a fit must come to relight within a given error; and
+//! they capture the photo with every true map held (only the camera terms fitted), with the
+//! true relief and flat: how much of the photo the relief explains against what no map can. SIZE: the capture size
 //! of simulator folders (default 256).
 //! SET: either a Mitsuba capture set (`validation/run.sh --capture-set`: each photo has
 //! `held_out` renders and truth maps in its pixel grid; captured at 320² with its true field
@@ -26,12 +35,13 @@ use anyhow::Context;
 use candle_core::Tensor;
 use photomat_brdfs as _; // link the built-in BRDF plugins
 use photomat_capture::evaluate::{
-    channel_scale, held_out_l1, map_errors, radiance_on_square, read_held_out,
+    channel_scale, held_out_l1, map_errors, mean_normal_angle_degrees, radiance_on_square,
+    read_held_out,
 };
 use photomat_capture::{CaptureOptions, capture, new_flash_positions};
 use photomat_core::flash::PHOTO_SIDE;
 use photomat_core::map_files::load_maps;
-use photomat_core::{Highlight, lookup};
+use photomat_core::{Highlight, MaterialMaps, lookup};
 
 /// The `photomat` binary's allocator, so that the seconds reported are the command's.
 #[global_allocator]
@@ -70,10 +80,10 @@ fn main() -> anyhow::Result<()> {
         .take(count)
         .collect();
     println!(
-        "| photo | family | warm-up:flags | L1 input | L1 held-out | diffuse | specular | roughness | normal ° | seconds |"
+        "| photo | family | warm-up:flags | L1 photo | L1 input | L1 held-out | diffuse | specular | roughness | normal ° | seconds |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|");
-    let mut totals = vec![[0.0f64; 6]; configs.len()];
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    let mut totals = vec![[0.0f64; 7]; configs.len()];
     for photo in &photos {
         let name = photo["photo"].as_str().context("no photo")?;
         let family = photo["family"].as_str().unwrap_or("?");
@@ -117,7 +127,7 @@ fn main() -> anyhow::Result<()> {
             let maps = truth.maps.clone().with_texel_size(Some(side / size as f64));
             let held = radiance_on_square(&truth.brdf, &maps, &lights, side)?;
             println!(
-                "| {name} | {family} | truth maps | | {:.4} | | | | | |",
+                "| {name} | {family} | truth maps | | | {:.4} | | | | | |",
                 held_out_l1(&held, &truth_held)?
             );
             // What flat normals alone cost: the true maps with their normal map set to +z.
@@ -130,12 +140,43 @@ fn main() -> anyhow::Result<()> {
                     1,
                 )?;
                 let mut flat = maps.clone();
-                flat.insert("normal", up);
+                flat.insert("normal", up.clone());
                 let held = radiance_on_square(&truth.brdf, &flat, &lights, side)?;
                 println!(
-                    "| {name} | {family} | truth maps, flat normals | | {:.4} | | | | | |",
+                    "| {name} | {family} | truth maps, flat normals | | | {:.4} | | | | | |",
                     held_out_l1(&held, &truth_held)?
                 );
+                // How closely the true maps themselves re-render the photo once the camera
+                // terms are fitted, with their relief and without: the part of the photo
+                // the relief explains, against what no map can (noise, JPEG, the camera's
+                // tilt and flash offset, the principled BSDF against ggx).
+                for (label, relief) in [("true relief", normal.clone()), ("flat", up.clone())] {
+                    let mut known = truth.maps.clone();
+                    known.insert("normal", relief);
+                    let options = CaptureOptions {
+                        size,
+                        fov_degrees: Some(fov),
+                        highlight: Some((row * scale_px, col * scale_px)),
+                        known_maps: Some(known),
+                        ..CaptureOptions::default()
+                    };
+                    let fit = capture(&bytes, name, &truth.brdf, &options, &mut |_, _| {})?;
+                    println!(
+                        "| {name} | {family} | truth maps held, {label} | {:.4} | | | | | | | |",
+                        photo_l1(&fit)?
+                    );
+                }
+                for s in [0.25, 0.5, 0.75] {
+                    let scaled = relief_scaled(normal, s)?;
+                    let degrees = mean_normal_angle_degrees(&scaled, normal)?;
+                    let mut maps = maps.clone();
+                    maps.insert("normal", scaled);
+                    let held = radiance_on_square(&truth.brdf, &maps, &lights, side)?;
+                    println!(
+                        "| {name} | {family} | truth maps, relief ×{s} | | | {:.4} | | | | {degrees:.2} | |",
+                        held_out_l1(&held, &truth_held)?
+                    );
+                }
             }
         }
         for (w, (warmup, flags)) in configs.iter().enumerate() {
@@ -152,6 +193,21 @@ fn main() -> anyhow::Result<()> {
                     Vec::new()
                 },
                 relief: !flags.contains('h'),
+                known_maps: flags
+                    .contains('k')
+                    .then(|| -> anyhow::Result<MaterialMaps> {
+                        let mut known = MaterialMaps::new();
+                        for name in ["diffuse", "specular", "roughness"] {
+                            known.insert(name, truth.maps.get(name)?.clone());
+                        }
+                        Ok(known)
+                    })
+                    .transpose()?,
+                smoothness: if flags.contains('s') {
+                    100.0 * CaptureOptions::default().smoothness
+                } else {
+                    CaptureOptions::default().smoothness
+                },
                 full_size_steps: if flags.contains('f') {
                     usize::MAX
                 } else {
@@ -186,14 +242,27 @@ fn main() -> anyhow::Result<()> {
                 [f64::NAN; 4]
             };
             let values = [
-                input_l1, held_l1, errors[0], errors[1], errors[2], errors[3],
+                input_l1,
+                held_l1,
+                errors[0],
+                errors[1],
+                errors[2],
+                errors[3],
+                photo_l1(&fit)?,
             ];
             for (t, v) in totals[w].iter_mut().zip(values) {
                 *t += v;
             }
             println!(
-                "| {name} | {family} | {warmup}:{flags} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} | {:.2} | {:.0} |",
-                values[0], values[1], values[2], values[3], values[4], values[5], fit.seconds
+                "| {name} | {family} | {warmup}:{flags} | {:.4} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} | {:.2} | {:.0} |",
+                values[6],
+                values[0],
+                values[1],
+                values[2],
+                values[3],
+                values[4],
+                values[5],
+                fit.seconds
             );
         }
     }
@@ -201,8 +270,9 @@ fn main() -> anyhow::Result<()> {
     for (w, (warmup, flags)) in configs.iter().enumerate() {
         let t = totals[w];
         println!(
-            "| mean of {} | | {warmup}:{flags} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} | {:.2} | |",
+            "| mean of {} | | {warmup}:{flags} | {:.4} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} | {:.2} | |",
             photos.len(),
+            t[6] / n,
             t[0] / n,
             t[1] / n,
             t[2] / n,
@@ -212,4 +282,23 @@ fn main() -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+/// The fit's data term: mean |re-render − photo| over display values, with the fitted
+/// gain and vignetting.
+fn photo_l1(fit: &photomat_capture::Capture) -> anyhow::Result<f64> {
+    Ok((&fit.render - &fit.photo)?
+        .abs()?
+        .mean_all()?
+        .to_scalar::<f32>()? as f64)
+}
+
+/// Unit normals (1, 3, N, N) whose slope is `s` times that of `normal`'s: (s·n_x, s·n_y, n_z)
+/// normalised.
+fn relief_scaled(normal: &Tensor, s: f64) -> candle_core::Result<Tensor> {
+    let tilted = Tensor::cat(
+        &[(normal.narrow(1, 0, 2)? * s)?, normal.narrow(1, 2, 1)?],
+        1,
+    )?;
+    tilted.broadcast_div(&tilted.sqr()?.sum_keepdim(1)?.sqrt()?)
 }

@@ -110,6 +110,20 @@ pub struct MapErrors {
     pub normal_degrees: f64,
 }
 
+/// Mean angle, in degrees, between two fields of unit normals (B, 3, H, W).
+pub fn mean_normal_angle_degrees(a: &Tensor, b: &Tensor) -> candle_core::Result<f64> {
+    let cosine = (a * b)?
+        .sum_keepdim(1)?
+        // Unit vectors' dot products may exceed 1 by rounding; acos needs [−1, 1].
+        .clamp(-1.0, 1.0)?;
+    let cosines = cosine.flatten_all()?.to_vec1::<f32>()?;
+    let total: f64 = cosines
+        .iter()
+        .map(|c| (*c as f64).acos().to_degrees())
+        .sum();
+    Ok(total / cosines.len() as f64)
+}
+
 /// Compares the shading maps (`Brdf::shading_maps`: a height model's normals derived) of
 /// `fitted` under `fitted_brdf` with those of `truth` under `truth_brdf`, the fitted diffuse
 /// and specular multiplied by `scale` (1, 3, 1, 1) first: the colour scale that gives the
@@ -132,16 +146,7 @@ pub fn map_errors(
     };
     let scaled =
         |name: &str| -> anyhow::Result<Tensor> { Ok(fitted.get(name)?.broadcast_mul(scale)?) };
-    let cosine = (fitted.get("normal")? * truth.get("normal")?)?
-        .sum_keepdim(1)?
-        // Unit vectors' dot products may exceed 1 by rounding; acos needs [−1, 1].
-        .clamp(-1.0, 1.0)?;
-    let cosines = cosine.flatten_all()?.to_vec1::<f32>()?;
-    let degrees = cosines
-        .iter()
-        .map(|c| (*c as f64).acos().to_degrees())
-        .sum::<f64>()
-        / cosines.len() as f64;
+    let degrees = mean_normal_angle_degrees(fitted.get("normal")?, truth.get("normal")?)?;
     Ok(MapErrors {
         diffuse_rmse: rmse(&scaled("diffuse")?, truth.get("diffuse")?)?,
         specular_rmse: rmse(&scaled("specular")?, truth.get("specular")?)?,

@@ -64,6 +64,7 @@
 pub mod camera;
 pub mod evaluate;
 pub mod field_of_view;
+mod held;
 pub mod prior;
 
 use std::path::Path;
@@ -82,6 +83,8 @@ use photomat_estimator::sample::choice::{Candidate, Selection, choose};
 use photomat_estimator::upsample::clamped_upsample_axis;
 use photomat_kernels::fir::separable;
 use photomat_train::{Adam, AdamConfig};
+
+use held::HeldChannels;
 use serde::Serialize;
 
 pub use camera::CameraTerms;
@@ -123,7 +126,7 @@ pub fn new_flash_positions(side: f64) -> Vec<Highlight> {
 }
 
 /// How a photo is fitted.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct CaptureOptions {
     /// Side of the square the photo is resampled to, and of the maps. Default 256.
     pub size: usize,
@@ -172,6 +175,14 @@ pub struct CaptureOptions {
     /// `roughness` of a material that varies in colour and relief only), so that they cannot
     /// paint the highlight in. Names the model lacks are an error.
     pub uniform_maps: Vec<String>,
+    /// Maps known from elsewhere (e.g. a diffuse albedo from a cross-polarised photo), each
+    /// (1, channels, N, N) at the capture's [`Self::size`] and named as the model's maps:
+    /// held at these values through the whole fit, so that the photo sets only the others.
+    /// With the true diffuse, specular and roughness maps this measures how well one photo
+    /// determines the relief (docs/benchmarks.md, "The relief of one photo with the
+    /// reflectance known"). Names the model lacks, or a map also in
+    /// [`Self::uniform_maps`], are errors. Default none.
+    pub known_maps: Option<MaterialMaps>,
     /// Fit the maps that shape the shading normal ([`RELIEF_MAPS`]) texel by texel in a fit
     /// from constant maps. Default off: they are held uniform (flat normals), which relit
     /// simulated and Mitsuba-rendered photos 7 % and 20 % better under held-out flashes, and
@@ -221,6 +232,7 @@ impl Default for CaptureOptions {
             vignetting: true,
             ambient: false,
             uniform_maps: Vec::new(),
+            known_maps: None,
             relief: false,
             full_size_steps: 100,
             coarse_min_size: 512,
@@ -262,6 +274,8 @@ pub struct Capture {
     pub prior: Option<PriorUsed>,
     /// How the model was chosen, for a capture in `auto` ([`capture_auto`]).
     pub selection: Option<Selection>,
+    /// The maps held at known values ([`CaptureOptions::known_maps`]).
+    pub known_maps: Vec<String>,
 }
 
 /// The coarse stage of a refinement: its side, steps and wall seconds.
@@ -603,12 +617,19 @@ fn refine(
             (start_raw, start_log_gain, None, None)
         };
     let offset = prior_used.as_ref().map_or(0, |p| p.inversion.losses.len());
+    let known = options.known_maps.as_ref();
     let mut held = options.uniform_maps.clone();
     if !options.relief && prior_used.is_none() {
         let relief = brdf.params().iter().map(|p| p.name);
-        held.extend(relief.filter(|n| RELIEF_MAPS.contains(n)).map(String::from));
+        // A known relief stays at its values rather than flat.
+        let is_known = |n: &str| known.is_some_and(|k| k.contains(n));
+        held.extend(
+            relief
+                .filter(|n| RELIEF_MAPS.contains(n) && !is_known(n))
+                .map(String::from),
+        );
     }
-    let tie = UniformChannels::new(brdf, &held)?;
+    let tie = HeldChannels::new(brdf, &held, known, input.size, 1)?;
     let terms = CameraTerms::new(start_log_gain, start_vignetting, start_ambient)?;
     let start = Instant::now();
     let mut losses = Vec::with_capacity(options.steps);
@@ -626,10 +647,11 @@ fn refine(
         // The warm-up's start is uniform, so it is the same at any size.
         let uniform = start_raw.narrow(2, 0, 1)?.narrow(3, 0, 1)?;
         let raw = uniform.broadcast_as((1, c, small.size, small.size))?;
+        let coarse_tie = HeldChannels::new(brdf, &held, known, input.size, factor)?;
         let stage = Stage {
             input: &small,
             brdf,
-            tie: &tie,
+            tie: &coarse_tie,
             terms: &terms,
             anchor: None,
             lr: options.lr,
@@ -690,6 +712,9 @@ fn refine(
         coarse,
         prior: prior_used,
         selection: None,
+        known_maps: known.map_or_else(Vec::new, |k| {
+            k.names().into_iter().map(String::from).collect()
+        }),
     })
 }
 
@@ -697,7 +722,7 @@ fn refine(
 struct Stage<'a> {
     input: &'a Input,
     brdf: &'a Brdf,
-    tie: &'a UniformChannels,
+    tie: &'a HeldChannels,
     /// Shared by the stages: the gain and vignetting carry over from one size to the next.
     terms: &'a CameraTerms,
     /// The prior's raw maps and the weight μ of the term holding the fit near them.
@@ -760,53 +785,6 @@ fn upsample_clamped(x: &Tensor, factor: usize) -> anyhow::Result<Tensor> {
         f /= 2;
     }
     Ok(x)
-}
-
-/// Which raw channels [`CaptureOptions::uniform_maps`] holds uniform, as a (1, C, 1, 1)
-/// mask: 1 on the channels of the named maps.
-struct UniformChannels {
-    mask: Option<Tensor>,
-}
-
-impl UniformChannels {
-    fn new(brdf: &Brdf, names: &[String]) -> anyhow::Result<Self> {
-        if names.is_empty() {
-            return Ok(Self { mask: None });
-        }
-        let params = brdf.params();
-        for name in names {
-            if !params.iter().any(|p| p.name == name) {
-                let known: Vec<&str> = params.iter().map(|p| p.name).collect();
-                bail!(
-                    "{}: no map named '{name}' to hold uniform (its maps: {})",
-                    brdf.name(),
-                    known.join(", ")
-                );
-            }
-        }
-        let mask: Vec<f32> = params
-            .iter()
-            .flat_map(|p| {
-                let tied = names.iter().any(|n| n == p.name);
-                vec![if tied { 1.0 } else { 0.0 }; p.channels]
-            })
-            .collect();
-        let c = mask.len();
-        Ok(Self {
-            mask: Some(Tensor::from_vec(mask, (1, c, 1, 1), &Device::Cpu)?),
-        })
-    }
-
-    /// `raw` (B, C, N, N) with the held channels replaced by their mean over the square; the
-    /// gradient reaching a held channel's texels is then the same for all of them.
-    fn apply(&self, raw: &Tensor) -> candle_core::Result<Tensor> {
-        let Some(mask) = &self.mask else {
-            return Ok(raw.clone());
-        };
-        let mean = raw.mean_keepdim(3)?.mean_keepdim(2)?;
-        let free = raw.broadcast_mul(&mask.affine(-1.0, 1.0)?)?;
-        free + mean.broadcast_mul(mask)?.broadcast_as(raw.shape())?
-    }
 }
 
 /// Side of the uniform warm-up's image ([`CaptureOptions::warmup_steps`]): 64² box-filtered
@@ -943,6 +921,9 @@ struct CaptureRecord<'a> {
     /// How the model was chosen (`--brdf auto`): every candidate's error, the tolerance.
     #[serde(skip_serializing_if = "Option::is_none")]
     selection: Option<serde_json::Value>,
+    /// The maps held at values known from elsewhere, when any were.
+    #[serde(skip_serializing_if = "<[String]>::is_empty")]
+    known_maps: &'a [String],
 }
 
 /// What `capture.json` records of the generator prior.
@@ -1069,6 +1050,7 @@ pub fn write_capture(
         coarse: capture.coarse,
         prior: prior_record,
         selection,
+        known_maps: &capture.known_maps,
     };
     write_atomic(
         &out.join("capture.json"),

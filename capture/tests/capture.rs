@@ -496,3 +496,67 @@ fn a_coarse_stage_fits_at_half_size_and_relights_as_well_as_the_full_size_fit() 
         "held-out L1 with a coarse stage {staged_l1}, without {whole_l1}"
     );
 }
+
+#[test]
+fn known_maps_are_held_at_their_values_through_both_stages_and_bad_ones_fail() {
+    // The true diffuse map held: the fit ends on it (to raw_for's clamping and f32), through
+    // a coarse stage at 32² (where it is held box-filtered) and the full-size steps, and
+    // records it; roughness is fitted. Wrong names, shapes and a map both uniform and known
+    // are errors that say so.
+    let (png, pixel) = photo();
+    let brdf = lookup("ggx").unwrap();
+    let diffuse = truth().get("diffuse").unwrap().clone();
+    let known = MaterialMaps::new().with("diffuse", diffuse.clone());
+    let options = CaptureOptions {
+        size: SIZE,
+        steps: 60,
+        fov_degrees: Some(TRAINING_FOV_DEGREES),
+        highlight: Some(pixel),
+        known_maps: Some(known.clone()),
+        full_size_steps: 20,
+        coarse_min_size: SIZE / 2,
+        ..CaptureOptions::default()
+    };
+    let fit = capture(&png, "rendered.png", &brdf, &options, &mut |_, _| {}).unwrap();
+    assert_eq!(fit.coarse.unwrap().size, SIZE / 2);
+    assert_eq!(fit.known_maps, vec!["diffuse".to_string()]);
+    let got = photomat_core::testing::values(fit.maps.get("diffuse").unwrap()).unwrap();
+    let want = photomat_core::testing::values(&diffuse).unwrap();
+    let worst = got
+        .iter()
+        .zip(&want)
+        .map(|(g, w)| (g - w).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-3, "held diffuse off by {worst}");
+    let roughness = photomat_core::testing::values(fit.maps.get("roughness").unwrap()).unwrap();
+    assert!(roughness.iter().any(|&r| (r - roughness[0]).abs() > 1e-4));
+
+    let failing = |known: MaterialMaps, uniform: Vec<String>| {
+        let options = CaptureOptions {
+            known_maps: Some(known),
+            uniform_maps: uniform,
+            ..options.clone()
+        };
+        capture(&png, "rendered.png", &brdf, &options, &mut |_, _| {})
+            .err()
+            .unwrap()
+            .to_string()
+    };
+    let err = failing(MaterialMaps::new().with("gloss", diffuse.clone()), vec![]);
+    assert!(
+        err.contains("'gloss'") && err.contains("roughness"),
+        "{err}"
+    );
+    let small = diffuse
+        .narrow(2, 0, SIZE / 2)
+        .unwrap()
+        .narrow(3, 0, SIZE / 2)
+        .unwrap();
+    let err = failing(MaterialMaps::new().with("diffuse", small), vec![]);
+    assert!(
+        err.contains("'diffuse'") && err.contains(&format!("{SIZE}, {SIZE}]")),
+        "{err}"
+    );
+    let err = failing(known, vec!["diffuse".into()]);
+    assert!(err.contains("'diffuse'") && err.contains("both"), "{err}");
+}

@@ -142,6 +142,26 @@ impl ParamSpec {
     }
 }
 
+impl ParamSpec {
+    /// The raw map that [`ParamSpec::decode`] maps to the physical `map` (B, channels, H, W),
+    /// texel by texel as [`ParamSpec::raw_for`] (so with its clamping just inside the range):
+    /// (B, channels, H, W). E.g. to hold a capture's map at values known from elsewhere.
+    pub fn raw_for_map(&self, map: &Tensor) -> Result<Tensor> {
+        let (b, c, h, w) = map.dims4()?;
+        if c != self.channels {
+            return Err(Error::Invalid(format!(
+                "map '{}' has {} channels, the values given have {c}",
+                self.name, self.channels
+            )));
+        }
+        let texels: Vec<f32> = map.permute((0, 2, 3, 1))?.flatten_all()?.to_vec1()?;
+        let raw: Vec<f32> = texels.chunks(c).flat_map(|v| self.raw_for(v)).collect();
+        Ok(Tensor::from_vec(raw, (b, h, w, c), map.device())?
+            .permute((0, 3, 1, 2))?
+            .contiguous()?)
+    }
+}
+
 /// Total channel count `n` of a list of specs: the estimator's output width.
 pub fn total_channels(specs: &[ParamSpec]) -> usize {
     specs.iter().map(|s| s.channels).sum()

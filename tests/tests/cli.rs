@@ -613,6 +613,70 @@ fn cli_capture_takes_the_field_of_view_and_refuses_one_out_of_range() {
     );
     assert!(out.join("relit.png").is_file());
 
+    // --known: the capture's own ggx folder held in a height model, which takes its diffuse,
+    // specular and roughness maps and not its normal map (a note says so); the fit keeps
+    // them and capture.json lists them.
+    let again = dir.path().join("again");
+    let material = out.join("material");
+    let printed = photomat(&[
+        "capture",
+        path_str(&photo),
+        "--brdf",
+        "height(ggx)",
+        "--out",
+        path_str(&again),
+        "--size",
+        "32",
+        "--steps",
+        "3",
+        "--known",
+        path_str(&material),
+    ])
+    .unwrap();
+    assert!(
+        printed.contains("note: --known: normal of") && printed.contains("not held"),
+        "{printed}"
+    );
+    let record: Value =
+        serde_json::from_slice(&std::fs::read(again.join("capture.json")).unwrap()).unwrap();
+    assert_eq!(
+        record["known_maps"],
+        serde_json::json!(["diffuse", "roughness", "specular"]),
+        "{record}"
+    );
+    let held = photomat_core::map_files::load_maps(&material, None)
+        .unwrap()
+        .maps;
+    let fitted = photomat_core::map_files::load_maps(&again.join("material"), None)
+        .unwrap()
+        .maps;
+    for name in ["diffuse", "roughness", "specular"] {
+        let a = photomat_core::testing::values(held.get(name).unwrap()).unwrap();
+        let b = photomat_core::testing::values(fitted.get(name).unwrap()).unwrap();
+        let worst = a
+            .iter()
+            .zip(&b)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-3, "{name} off by {worst}");
+    }
+    let err = photomat_error(&[
+        "capture",
+        path_str(&photo),
+        "--brdf",
+        "ggx",
+        "--out",
+        path_str(&dir.path().join("bigger")),
+        "--size",
+        "64",
+        "--known",
+        path_str(&material),
+    ]);
+    assert!(
+        err.contains("known map") && err.contains("64, 64]"),
+        "{err}"
+    );
+
     let err = photomat_error(&[
         "capture",
         path_str(&photo),

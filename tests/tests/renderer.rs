@@ -232,6 +232,47 @@ fn raw_for_inverts_decode_for_every_map_of_every_model() {
 }
 
 #[test]
+fn raw_for_map_inverts_decode_texel_by_texel() {
+    // A 1 × 3 map whose texels are the default, a value near the low end and one near the
+    // high end (for unit normals: +z, a 60° tilt and its mirror) decodes back from
+    // `raw_for_map` texel by texel, in place.
+    for spec in &photomat_tests::models_under_test() {
+        let brdf = model(spec);
+        for p in brdf.params() {
+            let (lo, hi) = p.range;
+            let texels: Vec<Vec<f32>> = if p.encoding == photomat_core::Encoding::UnitNormal {
+                let s = 0.75f32.sqrt();
+                vec![
+                    p.default.to_vec(),
+                    vec![s * 0.6, -s * 0.8, 0.5],
+                    vec![-s * 0.6, s * 0.8, 0.5],
+                ]
+            } else {
+                vec![
+                    p.default.to_vec(),
+                    vec![lo + 0.01 * (hi - lo); p.channels],
+                    vec![lo + 0.97 * (hi - lo); p.channels],
+                ]
+            };
+            // (1, C, 1, 3): channel-major, as the maps are stored.
+            let planar: Vec<f32> = (0..p.channels)
+                .flat_map(|c| texels.iter().map(move |t| t[c]))
+                .collect();
+            let map =
+                Tensor::from_vec(planar.clone(), (1, p.channels, 1, 3), &Device::Cpu).unwrap();
+            let got = values(&p.decode(&p.raw_for_map(&map).unwrap()).unwrap());
+            for (g, w) in got.iter().zip(&planar) {
+                let tol = 1e-3 * (hi - lo) as f64;
+                assert!((g - *w as f64).abs() < tol, "{spec}.{}: {g} vs {w}", p.name);
+            }
+            let wrong = Tensor::zeros((1, p.channels + 1, 1, 3), DType::F32, &Device::Cpu).unwrap();
+            let err = p.raw_for_map(&wrong).unwrap_err().to_string();
+            assert!(err.contains(p.name) && err.contains("channels"), "{err}");
+        }
+    }
+}
+
+#[test]
 fn renderer_rejects_bad_maps_with_clear_errors() {
     let brdf = model("ggx");
     let good = MaterialMaps::defaults(brdf.params(), 1, 8, DType::F32, &Device::Cpu).unwrap();

@@ -1,7 +1,7 @@
 //! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--size 256] [--steps 400] [--fov DEG]
 //! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]
-//! [--tolerance T] [--warmup-steps 100] [--no-vignetting] [--ambient] [--uniform MAP,…] [--relief]
-//! [--full-size-steps 100] [--gltf] [--mtlx]`:
+//! [--tolerance T] [--warmup-steps 100] [--no-vignetting] [--ambient] [--uniform MAP,…]
+//! [--known DIR] [--relief] [--full-size-steps 100] [--gltf] [--mtlx]`:
 //! one phone flash photo → maps of a named BRDF model. The fit is the
 //! library's `photomat_capture::capture_with_prior` (docs/capture.md): from constant maps, or,
 //! with `--prior` or `--model`, from the model folder's generator prior when the folder has an
@@ -14,15 +14,16 @@
 //! highlight, gain, losses, timings).
 
 use std::io::Write;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Context;
+use anyhow::{Context, bail};
 use candle_core::Device;
 use photomat_capture::{
     CaptureOptions, Exports, FOV_RANGE, GanPrior, PriorOptions, capture_auto, capture_with_prior,
     write_capture,
 };
-use photomat_core::{FolderLock, lookup};
+use photomat_core::map_files::load_maps;
+use photomat_core::{Brdf, FolderLock, MaterialMaps, lookup};
 use photomat_estimator::sample::choice::DEFAULT_TOLERANCE;
 
 use crate::common::{model_dir, parse_pair, steps_bar};
@@ -102,6 +103,13 @@ pub struct Args {
     #[arg(long, value_name = "MAP,…", value_delimiter = ',')]
     pub uniform: Vec<String>,
 
+    /// A material folder (as `capture`, `sample` or `simulate` write one) whose maps are
+    /// known: each of its maps that --brdf's model takes is held at its values through the
+    /// whole fit (e.g. a diffuse albedo from a cross-polarised photo) and the photo sets the
+    /// others; its maps must be --size texels square. capture.json lists the maps held.
+    #[arg(long, value_name = "DIR")]
+    pub known: Option<PathBuf>,
+
     /// Steps of the uniform warm-up of a fit from constant maps: one value per map channel,
     /// the exposure, the vignetting and the ambient light, fitted to the photo at 64² before
     /// the per-texel fit starts from them (0: none, and no vignetting or ambient light)
@@ -145,6 +153,42 @@ pub struct Args {
     pub mtlx: bool,
 }
 
+/// The maps of the material folder `dir` that `brdf` takes (the others are named in a note
+/// on `out`); a folder that holds none of them is an error.
+fn known_maps(dir: &Path, brdf: &Brdf, out: &mut dyn Write) -> anyhow::Result<MaterialMaps> {
+    let loaded = load_maps(dir, None)
+        .with_context(|| format!("--known: cannot load '{}'", dir.display()))?;
+    let takes: Vec<&str> = brdf.params().iter().map(|p| p.name).collect();
+    let mut held = MaterialMaps::new();
+    let mut skipped = Vec::new();
+    for (name, map) in loaded.maps.iter() {
+        if takes.contains(&name) {
+            held.insert(name, map.clone());
+        } else {
+            skipped.push(name);
+        }
+    }
+    if held.names().is_empty() {
+        bail!(
+            "--known: '{}' has none of {}'s maps ({}); it has {}",
+            dir.display(),
+            brdf.name(),
+            takes.join(", "),
+            loaded.maps.names().join(", ")
+        );
+    }
+    if !skipped.is_empty() {
+        writeln!(
+            out,
+            "note: --known: {} of '{}' not held ({} does not take them)",
+            skipped.join(", "),
+            dir.display(),
+            brdf.name()
+        )?;
+    }
+    Ok(held)
+}
+
 /// A finite weight ≥ 0.
 fn parse_weight(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {
@@ -178,8 +222,14 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     };
     let bytes = std::fs::read(&args.photo)
         .with_context(|| format!("cannot read '{}'", args.photo.display()))?;
+    let known_maps = match (&args.known, &brdf) {
+        (None, _) => None,
+        (Some(_), None) => bail!("--known needs a named --brdf: `auto` chooses the model later"),
+        (Some(dir), Some(brdf)) => Some(known_maps(dir, brdf, out)?),
+    };
     let defaults = CaptureOptions::default();
     let options = CaptureOptions {
+        known_maps,
         size: args.size.map_or(defaults.size, |n| n as usize),
         steps: args.steps.map_or(defaults.steps, |k| k as usize),
         highlight: args.highlight,
