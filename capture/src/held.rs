@@ -68,40 +68,10 @@ impl HeldChannels {
             Some(mask(&|n| uniform.iter().any(|u| u == n))?)
         };
         let known = match known {
-            Some(maps) if !known_names.is_empty() => {
-                let size = full_size / factor;
-                let mut raws = Vec::with_capacity(params.len());
-                for p in params {
-                    let raw = match maps.get(p.name) {
-                        Ok(map) => {
-                            let dims = map.dims();
-                            if dims != [1, p.channels, full_size, full_size] {
-                                bail!(
-                                    "known map '{}' has shape {dims:?}, the capture takes \
-                                     [1, {}, {full_size}, {full_size}]",
-                                    p.name,
-                                    p.channels
-                                );
-                            }
-                            let mut map = map.to_dtype(DType::F32)?;
-                            if factor > 1 {
-                                // What the coarse stage's box-filtered photo saw; a unit
-                                // normal's average is renormalised.
-                                map = map.avg_pool2d(factor)?;
-                                if p.encoding == Encoding::UnitNormal {
-                                    map = normalize3(&map)?;
-                                }
-                            }
-                            p.raw_for_map(&map)?
-                        }
-                        Err(_) => {
-                            Tensor::zeros((1, p.channels, size, size), DType::F32, &Device::Cpu)?
-                        }
-                    };
-                    raws.push(raw);
-                }
-                Some((Tensor::cat(&raws, 1)?, mask(&|n| known_names.contains(&n))?))
-            }
+            Some(maps) if !known_names.is_empty() => Some((
+                known_raw(brdf, maps, full_size, factor)?,
+                mask(&|n| known_names.contains(&n))?,
+            )),
             _ => None,
         };
         Ok(Self {
@@ -126,4 +96,46 @@ impl HeldChannels {
         }
         Ok(raw)
     }
+}
+
+/// The raw values (1, C, N / `factor`, N / `factor`) of the maps of `known` (each
+/// (1, channels, N, N), N = `full_size`) box-filtered by `factor`, in the channel order of
+/// `brdf`'s maps; 0 on the channels of maps `known` lacks.
+fn known_raw(
+    brdf: &Brdf,
+    known: &MaterialMaps,
+    full_size: usize,
+    factor: usize,
+) -> anyhow::Result<Tensor> {
+    let size = full_size / factor;
+    let mut raws = Vec::new();
+    for p in brdf.params() {
+        let Ok(map) = known.get(p.name) else {
+            raws.push(Tensor::zeros(
+                (1, p.channels, size, size),
+                DType::F32,
+                &Device::Cpu,
+            )?);
+            continue;
+        };
+        let dims = map.dims();
+        if dims != [1, p.channels, full_size, full_size] {
+            bail!(
+                "known map '{}' has shape {dims:?}, the capture takes [1, {}, {full_size}, {full_size}]",
+                p.name,
+                p.channels
+            );
+        }
+        let mut map = map.to_dtype(DType::F32)?;
+        if factor > 1 {
+            // What the coarse stage's box-filtered photo saw; a unit normal's average is
+            // renormalised.
+            map = map.avg_pool2d(factor)?;
+            if p.encoding == Encoding::UnitNormal {
+                map = normalize3(&map)?;
+            }
+        }
+        raws.push(p.raw_for_map(&map)?);
+    }
+    Ok(Tensor::cat(&raws, 1)?)
 }

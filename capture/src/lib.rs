@@ -51,8 +51,9 @@
 //! and the vignetting are set by the whole photo before the per-texel refinement starts
 //! from them; on simulated and Mitsuba-rendered photos this relit 25 % and 4 % better under
 //! held-out flashes (docs/benchmarks.md, "The direct capture's uniform warm-up"). The relief
-//! stays flat through the refinement unless [`CaptureOptions::relief`] asks for it, and
-//! [`CaptureOptions::uniform_maps`] holds other named maps at one value as well.
+//! stays flat through the refinement unless [`CaptureOptions::relief`] asks for it,
+//! [`CaptureOptions::uniform_maps`] holds other named maps at one value as well, and
+//! [`CaptureOptions::known_maps`] holds maps known from elsewhere at their values (`held`).
 //!
 //! Large fits from constant maps start coarse: the first steps of a capture of at least twice
 //! [`CaptureOptions::coarse_min_size`] run on the photo box-filtered to a smaller size
