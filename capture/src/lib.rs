@@ -84,9 +84,9 @@ use photomat_estimator::sample::choice::{Candidate, Selection, choose};
 use photomat_estimator::upsample::clamped_upsample_axis;
 use photomat_kernels::fir::separable;
 use photomat_train::{Adam, AdamConfig};
+use serde::Serialize;
 
 use held::HeldChannels;
-use serde::Serialize;
 
 pub use camera::CameraTerms;
 pub use field_of_view::{FieldOfView, FovSource};
