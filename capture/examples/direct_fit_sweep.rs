@@ -241,27 +241,28 @@ fn main() -> anyhow::Result<()> {
             } else {
                 [f64::NAN; 4]
             };
+            // In the table's order.
             let values = [
+                photo_l1(&fit)?,
                 input_l1,
                 held_l1,
                 errors[0],
                 errors[1],
                 errors[2],
                 errors[3],
-                photo_l1(&fit)?,
             ];
             for (t, v) in totals[w].iter_mut().zip(values) {
                 *t += v;
             }
             println!(
                 "| {name} | {family} | {warmup}:{flags} | {:.4} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} | {:.2} | {:.0} |",
-                values[6],
                 values[0],
                 values[1],
                 values[2],
                 values[3],
                 values[4],
                 values[5],
+                values[6],
                 fit.seconds
             );
         }
@@ -272,13 +273,13 @@ fn main() -> anyhow::Result<()> {
         println!(
             "| mean of {} | | {warmup}:{flags} | {:.4} | {:.4} | {:.4} | {:.3} | {:.3} | {:.3} | {:.2} | |",
             photos.len(),
-            t[6] / n,
             t[0] / n,
             t[1] / n,
             t[2] / n,
             t[3] / n,
             t[4] / n,
-            t[5] / n
+            t[5] / n,
+            t[6] / n
         );
     }
     Ok(())

@@ -32,27 +32,25 @@ impl HeldChannels {
     ) -> anyhow::Result<Self> {
         let params = brdf.params();
         let known_names: Vec<&str> = known.map_or_else(Vec::new, |k| k.names());
-        let theirs = || params.iter().map(|p| p.name).collect::<Vec<_>>().join(", ");
-        for name in uniform.iter().map(String::as_str) {
+        let ensure_taken = |name: &str, purpose: &str| -> anyhow::Result<()> {
             if !params.iter().any(|p| p.name == name) {
+                let theirs: Vec<&str> = params.iter().map(|p| p.name).collect();
                 bail!(
-                    "{}: no map named '{name}' to hold uniform (its maps: {})",
+                    "{}: no map named '{name}' to hold {purpose} (its maps: {})",
                     brdf.name(),
-                    theirs()
+                    theirs.join(", ")
                 );
             }
+            Ok(())
+        };
+        for name in uniform.iter().map(String::as_str) {
+            ensure_taken(name, "uniform")?;
             if known_names.contains(&name) {
                 bail!("map '{name}' is held both uniform and at known values: choose one");
             }
         }
         for name in &known_names {
-            if !params.iter().any(|p| p.name == *name) {
-                bail!(
-                    "{}: no map named '{name}' to hold at known values (its maps: {})",
-                    brdf.name(),
-                    theirs()
-                );
-            }
+            ensure_taken(name, "at known values")?;
         }
         let mask = |held: &dyn Fn(&str) -> bool| -> candle_core::Result<Tensor> {
             let m: Vec<f32> = params

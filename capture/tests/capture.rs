@@ -15,6 +15,7 @@ use photomat_core::map_files::load_maps;
 use photomat_core::render::render_radiance_with;
 use photomat_core::{FlashGeometry, Highlight, MaterialMaps, encode_display, lookup};
 use photomat_data::dataset::lens::{LensRecord, fov_from_35mm_equivalent};
+use photomat_kernels::testing::max_abs_diff;
 
 const SIZE: usize = 64;
 
@@ -520,13 +521,7 @@ fn known_maps_are_held_at_their_values_through_both_stages_and_bad_ones_fail() {
     let fit = capture(&png, "rendered.png", &brdf, &options, &mut |_, _| {}).unwrap();
     assert_eq!(fit.coarse.unwrap().size, SIZE / 2);
     assert_eq!(fit.known_maps, vec!["diffuse".to_string()]);
-    let got = photomat_core::testing::values(fit.maps.get("diffuse").unwrap()).unwrap();
-    let want = photomat_core::testing::values(&diffuse).unwrap();
-    let worst = got
-        .iter()
-        .zip(&want)
-        .map(|(g, w)| (g - w).abs())
-        .fold(0.0, f64::max);
+    let worst = max_abs_diff(fit.maps.get("diffuse").unwrap(), &diffuse).unwrap();
     assert!(worst < 1e-3, "held diffuse off by {worst}");
     let roughness = photomat_core::testing::values(fit.maps.get("roughness").unwrap()).unwrap();
     assert!(roughness.iter().any(|&r| (r - roughness[0]).abs() > 1e-4));

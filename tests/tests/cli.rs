@@ -651,13 +651,11 @@ fn cli_capture_takes_the_field_of_view_and_refuses_one_out_of_range() {
         .unwrap()
         .maps;
     for name in ["diffuse", "roughness", "specular"] {
-        let a = photomat_core::testing::values(held.get(name).unwrap()).unwrap();
-        let b = photomat_core::testing::values(fitted.get(name).unwrap()).unwrap();
-        let worst = a
-            .iter()
-            .zip(&b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max);
+        let worst = photomat_kernels::testing::max_abs_diff(
+            held.get(name).unwrap(),
+            fitted.get(name).unwrap(),
+        )
+        .unwrap();
         assert!(worst < 1e-3, "{name} off by {worst}");
     }
     let err = photomat_error(&[

@@ -70,14 +70,6 @@ fn load_error(dir: &Path) -> (PathBuf, String) {
     }
 }
 
-fn max_abs_diff(a: &Tensor, b: &Tensor) -> f64 {
-    values(a)
-        .iter()
-        .zip(values(b))
-        .map(|(x, y)| (x - y).abs())
-        .fold(0.0, f64::max)
-}
-
 #[test]
 fn map_files_registry_has_the_builtins() {
     assert_eq!(registered_names().unwrap(), expected_builtins());
@@ -461,7 +453,9 @@ fn map_files_png_normals_are_renormalised() {
     let n = loaded.maps.get("normal").unwrap();
     let len2 = values(&n.sqr().unwrap().sum_keepdim(1).unwrap());
     assert!(len2.iter().all(|l| (l - 1.0).abs() < 1e-6), "{len2:?}");
-    assert!(max_abs_diff(n, maps.get("normal").unwrap()) < 1e-4);
+    assert!(
+        photomat_kernels::testing::max_abs_diff(n, maps.get("normal").unwrap()).unwrap() < 1e-4
+    );
 }
 
 #[test]
