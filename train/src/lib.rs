@@ -10,6 +10,10 @@
 //!   after repeated skips with an error naming the step and the loss;
 //! - [`roll`]: per-sample wrap-around rolls of NCHW tensors and material maps (tileable
 //!   training, the estimator's fine-tune);
+//! - [`run_log`]: a run's `log.csv`, appended row by row and cut back to the checkpoint when
+//!   the run resumes;
+//! - [`settings`]: the one rule by which a trainer's given settings meet its defaults (fresh
+//!   run) or its saved `train.json` (resumed run: fixed settings refused, the others noted);
 //! - [`varmap`]: the [`candle_nn::VarMap`] plumbing both trainers need to gather their
 //!   variables into one training-state file.
 //!
@@ -20,8 +24,12 @@
 pub mod adam;
 pub mod nan_guard;
 pub mod roll;
+pub mod run_log;
+pub mod settings;
 pub mod varmap;
 
 pub use adam::{Adam, AdamConfig};
 pub use nan_guard::{NanGuard, gradients_finite};
 pub use roll::{roll_maps, roll_offsets, roll_per_sample, window_per_sample};
+pub use run_log::RunLog;
+pub use settings::{Merged, OnResume, Setting, merge};

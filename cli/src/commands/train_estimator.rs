@@ -34,107 +34,24 @@ use crate::common::{interruption, steps_bar, stop_flag};
 #[derive(Debug, clap::Args)]
 #[command(after_help = crate::common::STOP_HELP)]
 pub struct Args {
-    /// GAN model folder (`photomat train-gan` output: gan.json + gan.safetensors). Taken from
-    /// RUN_E/train.json with --resume.
-    #[arg(long, value_name = "RUN")]
-    pub gan: Option<PathBuf>,
-
-    /// BRDF model E decodes into, e.g. `ggx`, `height(ggx)`, `coated` (`photomat brdfs` lists
-    /// them). Taken from RUN_E/train.json with --resume.
-    #[arg(long, value_name = "SPEC")]
-    pub brdf: Option<String>,
-
     /// Run folder: the trained model (E + a copy of the GAN), checkpoints, panels, log.
     #[arg(long, value_name = "RUN_E")]
     pub out: PathBuf,
 
-    /// Steps of stage 1 (aligned L1 + Gram) [default: 60000, the paper's].
-    #[arg(long, value_name = "N")]
-    pub steps: Option<u64>,
-
-    /// Steps of stage 2, the fine-tune with rolled maps [default: 60000, the paper's].
-    #[arg(long, value_name = "M")]
-    pub finetune_steps: Option<u64>,
-
-    /// Materials per step [default: 4].
-    #[arg(long, value_name = "B")]
-    pub batch: Option<usize>,
-
-    /// Adam learning rate of stage 1 [default: 1e-4].
-    #[arg(long, value_name = "LR")]
-    pub lr: Option<f64>,
-
-    /// Adam learning rate of the fine-tune [default: 5e-5].
-    #[arg(long, value_name = "LR")]
-    pub finetune_lr: Option<f64>,
-
-    /// VGG19 weights (safetensors, torchvision's `vgg19().features` names
-    /// `features.{0,2,5,…,34}.{weight,bias}`) for the Gram loss; without it a seeded random
-    /// conv bank is used.
-    #[arg(long, value_name = "FILE", long_help = VGG19_HELP)]
-    pub vgg19: Option<PathBuf>,
-
-    /// Width multiplier of E's channels (1 = the paper's 32…256; 0.25 for CPU training)
-    /// [default: 1].
-    #[arg(long, value_name = "W")]
-    pub width: Option<f64>,
-
-    /// Seed of the run: E's initial weights, every step's materials, lights and rolls
-    /// [default: 0].
-    #[arg(long, value_name = "S")]
-    pub seed: Option<u64>,
-
-    /// Steps between training panels in RUN_E/panels/ [default: 500; on --resume the run's,
-    /// from train.json].
-    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
-    pub panel_every: Option<u64>,
-
-    /// Steps between checkpoints [default: 500; on --resume the run's].
-    #[arg(long, value_name = "K", value_parser = clap::value_parser!(u64).range(1..))]
-    pub checkpoint_every: Option<u64>,
-
     /// Continue the run in RUN_E from its last checkpoint.
     #[arg(long)]
     pub resume: bool,
-}
 
-/// `--help` text of `--vgg19`: what the file holds and how to write it.
-const VGG19_HELP: &str = "VGG19 weights for the Gram loss, as a safetensors file with \
-torchvision's `vgg19().features` tensors `features.{0,2,5,7,10,12,14,16,19,21,23,25,28,30,32,34}.{weight,bias}` \
-(max-pools are replaced by average pools; features after pool1–pool5, ImageNet-normalised input). \
-Write it once with PyTorch, torchvision and safetensors:
-
-  import torchvision
-  from safetensors.torch import save_file
-  vgg = torchvision.models.vgg19(weights=torchvision.models.VGG19_Weights.IMAGENET1K_V1)
-  save_file({f\"features.{k}\": v.contiguous() for k, v in vgg.features.state_dict().items()}, \"vgg19.safetensors\")
-
-Without --vgg19, a seeded random conv bank with the same five pooled stages (3→16→32→64→64→64) \
-gives the Gram statistics (Ustyuzhaninov et al. 2017).";
-
-impl Args {
-    /// The run's settings as the flags give them.
-    fn settings(&self) -> EstimatorSettings {
-        EstimatorSettings {
-            gan: self.gan.clone(),
-            brdf: self.brdf.clone(),
-            steps: self.steps,
-            finetune_steps: self.finetune_steps,
-            batch: self.batch,
-            lr: self.lr,
-            finetune_lr: self.finetune_lr,
-            vgg19: self.vgg19.clone(),
-            width: self.width,
-            seed: self.seed,
-            panel_every: self.panel_every,
-            checkpoint_every: self.checkpoint_every,
-        }
-    }
+    #[command(flatten)]
+    pub settings: EstimatorSettings,
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let run = &args.out;
-    let mut training = EstimatorTraining::open(run, &args.settings(), args.resume, &Device::Cpu)?;
+    let mut training = EstimatorTraining::open(run, &args.settings, args.resume, &Device::Cpu)?;
+    for note in training.notes() {
+        eprintln!("{note}");
+    }
     let stop = stop_flag()?;
     let trainer = training.trainer();
     let config = trainer.config().clone();

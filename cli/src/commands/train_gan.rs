@@ -46,11 +46,6 @@ use crate::common::{interruption, steps_bar, stop_flag};
 #[command(group(clap::ArgGroup::new("length").args(["steps", "kimg"]).required(true)))]
 #[command(after_help = crate::common::STOP_HELP)]
 pub struct Args {
-    /// Prepared data set folder (`photomat prepare` output); its photos must be at least
-    /// twice the model size. Taken from RUN/train.json with --resume.
-    #[arg(long, value_name = "DATASET")]
-    pub data: Option<PathBuf>,
-
     /// Run folder: checkpoints, samples, log and the trained GAN model.
     #[arg(long, value_name = "RUN")]
     pub out: PathBuf,
@@ -63,193 +58,15 @@ pub struct Args {
     #[arg(long, value_name = "K")]
     pub kimg: Option<f64>,
 
-    /// Model side: a power of two in 32 … 1024 [default: 64].
-    #[arg(long, value_name = "PIXELS")]
-    pub size: Option<usize>,
-
-    /// Channel multiplier of G and D (1 = the reference's widths) [default: 0.25].
-    #[arg(long, value_name = "M")]
-    pub multiplier: Option<f64>,
-
-    /// Dimension of z and w [default: 512].
-    #[arg(long, value_name = "D")]
-    pub latent_dim: Option<usize>,
-
-    /// Images per step [default: 4].
-    #[arg(long, value_name = "B")]
-    pub batch: Option<usize>,
-
-    /// Seed of the run: initial weights and every random draw [default: 0].
-    #[arg(long, value_name = "S")]
-    pub seed: Option<u64>,
-
-    /// Tileable generator: circular padding, F rolled per sample before M.
-    #[arg(long)]
-    pub tileable: bool,
-
-    /// Base learning rate of G, M and D before the lazy-regularisation correction
-    /// [default: 0.0025].
-    #[arg(long, value_name = "LR")]
-    pub lr: Option<f64>,
-
-    /// Weight of StyleGAN2's path-length regularisation of G, every 4 steps on half a batch
-    /// (the reference uses 2; a step then takes about 1.25× as long) [default: 0, off].
-    #[arg(long, value_name = "W")]
-    pub pl_weight: Option<f64>,
-
-    /// Learning-rate multiplier of every layer of M [default: the reference's 0.01]. M's
-    /// weights move by about lr·multiplier/√64 per step, so short CPU runs (a few thousand
-    /// steps) need a larger one (e.g. 0.1) for M to learn to move the highlight.
-    #[arg(long, value_name = "M")]
-    pub relight_lr_multiplier: Option<f64>,
-
-    /// R1 weight γ on D's gradient at real images, applied every 16 steps
-    /// [default: the reference's 0.0002·size²/batch]. Raise it (e.g. ×10) when D overpowers G
-    /// on a small data set (real/fake logit gap growing without bound in log.csv).
-    #[arg(long, value_name = "GAMMA")]
-    pub r1_gamma: Option<f64>,
-
-    /// Exponents s of the Phong lobes ω_z^s that the relighting MLP reads next to the light
-    /// direction, comma-separated, or `none` for the paper's MLP on features ‖ ω [default:
-    /// 4,16,64,256,1024: highlight peaks from 0.5 to 0.03 rad wide, which an MLP on ω alone
-    /// learns slowly].
-    #[arg(long, value_name = "S,S,…", value_parser = parse_lobes)]
-    pub relight_lobes: Option<Lobes>,
-
-    /// Weight of the discriminator's light-mismatch term: real photos shown under another
-    /// sample's flash count as fakes, so that the relighting must follow the light (0: off,
-    /// StyleGAN2's loss) [default: 1].
-    #[arg(long, value_name = "W")]
-    pub light_mismatch: Option<f64>,
-
-    /// Spatial (any-size) generator: a field of local latents replaces the 4×4 constant, and
-    /// the run trains on --size × --size patches cut from the photos at their prepared
-    /// resolution (no shrinking), each with the photo's own flash geometry. Implies
-    /// --tileable. The model then samples materials of any multiple of size/4 texels.
-    #[arg(long)]
-    pub spatial: bool,
-
-    /// Leave out StyleGAN2's per-pixel noise inputs: all variation then comes from the
-    /// latents (the local latents of a spatial generator), as in spatial texture GANs. On a
-    /// CPU-sized spatial run the learned noise became a per-texel speckle.
-    #[arg(long)]
-    pub no_noise: bool,
-
-    /// Gain k of the discriminator's input sharpening: D reads x + k·(x − 3×3 mean of x), the
-    /// images' detail amplified k + 1 times, so that it sees texture that is faint next to
-    /// the colour and the highlight [default: 0, StyleGAN2's D; 9 is what was measured].
-    #[arg(long, value_name = "K")]
-    pub d_sharpen: Option<f64>,
-
-    /// Relief in the neural material: M shades each texel in the frame of a normal from a
-    /// learned height channel of F, so that the light dependence M learns can be relief that
-    /// the estimator's normals then show. May be switched on when resuming a run without it
-    /// (its projection starts at zero: outputs unchanged until it trains).
-    #[arg(long)]
-    pub relief: bool,
-
-    /// Channels of the spatial generator's local latents (one vector per size/4 cell)
-    /// [default: 32].
-    #[arg(long, value_name = "N", requires = "spatial",
-          value_parser = clap::value_parser!(u32).range(1..=4096))]
-    pub local_dim: Option<u32>,
-
-    /// Periodic channels of the spatial generator: N plane waves whose wave vectors follow
-    /// the material's style, added at every block, for lattices that repeat across many
-    /// cells (tiles, weave; PSGAN's periodic latents) [default: 0].
-    #[arg(long, value_name = "N", requires = "spatial",
-          value_parser = clap::value_parser!(u32).range(0..=256))]
-    pub waves: Option<u32>,
-
-    /// Probability that a training patch holds the photo's highlight [default: 0.5]; under
-    /// uniform positions a 64² patch of a 512² photo holds it in about 2 % of draws.
-    #[arg(long, value_name = "P", requires = "spatial")]
-    pub highlight_prob: Option<f64>,
-
-    /// Steps between checkpoints (state, GAN model folder) [default: 500; on --resume the
-    /// run's, from train.json].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
-    pub checkpoint_every: Option<u64>,
-
-    /// Steps between sample grids in RUN/samples/ [default: 500; on --resume the run's].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
-    pub sample_every: Option<u64>,
-
-    /// Steps between SWD measurements of G_ema against the data set (logged in log.csv;
-    /// 0: never) [default: 1000; on --resume the run's].
-    #[arg(long, value_name = "N")]
-    pub swd_every: Option<u64>,
-
-    /// Fakes and real crops per SWD measurement (a fixed, seeded set) [default: 64; on
-    /// --resume the run's].
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(1..))]
-    pub swd_count: Option<u64>,
-
-    /// Steps between snapshots of G_ema + M, each a model folder RUN/snapshots/step-NNNNNN/
-    /// (0: none; about 2 MB each for the bundled recipe). The model's quality swings between
-    /// checkpoints, so keep snapshots and pick one with `photomat rank-snapshots` [default:
-    /// 0; on --resume the run's].
-    #[arg(long, value_name = "N")]
-    pub snapshot_every: Option<u64>,
-
     /// Continue the run in RUN from its last checkpoint.
     #[arg(long)]
     pub resume: bool,
-}
 
-/// The exponents of `--relight-lobes` (a newtype: clap reads a `Vec` as repeated values).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Lobes(pub Vec<f64>);
-
-/// `none`, or comma-separated finite exponents ≥ 1.
-fn parse_lobes(text: &str) -> Result<Lobes, String> {
-    if text.trim() == "none" {
-        return Ok(Lobes(Vec::new()));
-    }
-    text.split(',')
-        .map(|part| match part.trim().parse::<f64>() {
-            Ok(s) if s.is_finite() && s >= 1.0 => Ok(s),
-            _ => Err(format!(
-                "'{}' is not a lobe exponent (a number ≥ 1; or give `none`)",
-                part.trim()
-            )),
-        })
-        .collect::<Result<Vec<_>, _>>()
-        .map(Lobes)
+    #[command(flatten)]
+    pub settings: GanSettings,
 }
 
 impl Args {
-    /// The run's settings as the flags give them.
-    fn settings(&self) -> GanSettings {
-        GanSettings {
-            data: self.data.clone(),
-            size: self.size,
-            multiplier: self.multiplier,
-            latent_dim: self.latent_dim,
-            batch: self.batch,
-            seed: self.seed,
-            tileable: self.tileable,
-            lr: self.lr,
-            pl_weight: self.pl_weight,
-            relight_lr_multiplier: self.relight_lr_multiplier,
-            r1_gamma: self.r1_gamma,
-            spatial: self.spatial,
-            local_dim: self.local_dim.map(|v| v as usize),
-            waves: self.waves.map(|v| v as usize),
-            highlight_prob: self.highlight_prob,
-            light_mismatch: self.light_mismatch,
-            relight_lobes: self.relight_lobes.clone().map(|l| l.0),
-            no_noise: self.no_noise,
-            d_sharpen: self.d_sharpen,
-            relief: self.relief,
-            checkpoint_every: self.checkpoint_every,
-            sample_every: self.sample_every,
-            swd_every: self.swd_every,
-            swd_count: self.swd_count,
-            snapshot_every: self.snapshot_every,
-        }
-    }
-
     /// `--steps N` or `--kimg K` (clap requires one).
     fn length(&self) -> anyhow::Result<RunLength> {
         match (self.steps, self.kimg) {
@@ -261,7 +78,7 @@ impl Args {
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let mut plan = GanTraining::plan(&args.out, &args.settings(), args.resume)?;
+    let mut plan = GanTraining::plan(&args.out, &args.settings, args.resume)?;
     for note in &plan.notes {
         eprintln!("{note}");
     }

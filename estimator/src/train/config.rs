@@ -1,7 +1,7 @@
 //! Hyper-parameters of the estimator's training (PhotoMat §3 "Material map estimator" and §4;
 //! the reference's values in `docs/neural-models.md`, "Training E"): two stages, Adam, loss
 //! weights, the feature extractor of the Gram term and the run seed. Saved as JSON next to every
-//! checkpoint so a resumed run can refuse contradicting settings by name.
+//! checkpoint so a resumed run can refuse contradicting settings by name (`super::settings`).
 
 use std::path::PathBuf;
 
@@ -200,56 +200,11 @@ impl TrainConfig {
         }
         Ok(())
     }
-
-    /// Fields a resumed run must share with the checkpoint's (everything but the step
-    /// counts, which may be extended); the error names the first differing field.
-    pub fn check_resume(&self, saved: &TrainConfig) -> Result<()> {
-        let json = |c: &TrainConfig| {
-            serde_json::to_value(c).map_err(|e| Error::Invalid(format!("training config: {e}")))
-        };
-        let (a, b) = (json(self)?, json(saved)?);
-        let (a, b) = (a.as_object(), b.as_object());
-        let (Some(a), Some(b)) = (a, b) else {
-            invalid!("training configs are not JSON objects");
-        };
-        for (key, value) in a {
-            if matches!(key.as_str(), "steps" | "finetune_steps" | "cadence") {
-                continue;
-            }
-            if b.get(key) != Some(value) {
-                invalid!(
-                    "{key} = {value} contradicts the checkpoint's {key} = {}",
-                    b.get(key).unwrap_or(&serde_json::Value::Null)
-                );
-            }
-        }
-        Ok(())
-    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn resume_allows_longer_runs_and_names_a_changed_field() {
-        let saved = TrainConfig::default();
-        let longer = TrainConfig {
-            steps: 90_000,
-            finetune_steps: 10,
-            ..saved.clone()
-        };
-        assert!(longer.check_resume(&saved).is_ok());
-        let other = TrainConfig {
-            batch: 8,
-            ..saved.clone()
-        };
-        let err = other.check_resume(&saved).unwrap_err().to_string();
-        assert!(
-            err.contains("batch = 8") && err.contains("batch = 4"),
-            "{err}"
-        );
-    }
 
     #[test]
     fn validation_names_the_field() {

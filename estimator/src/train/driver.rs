@@ -5,7 +5,8 @@
 //! [`EstimatorTraining::open`] builds a fresh run from [`EstimatorSettings`] (the GAN model
 //! folder and the BRDF model are required) or resumes the one in the folder, refusing a
 //! setting that contradicts its `train.json`: the GAN folder, the BRDF model, E's width and
-//! every training field but the step counts ([`TrainConfig::check_resume`]), which may grow.
+//! every training setting but the step counts, which may grow, and the cadence of outputs
+//! ([`super::settings`]).
 //! [`EstimatorTraining::run`] stops after the current step when the stop flag is set (e.g. by a
 //! Ctrl-C handler) and reports each step to a callback; a resumed run is bit-identical to an
 //! uninterrupted one.
@@ -15,29 +16,24 @@
 //! `train.json` + `train_state.safetensors`, `log.csv` (one row per step) and
 //! `panels/step-NNNNNN.png` (per material: M's relighting | the analytic render | the maps).
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
 use candle_core::Device;
-use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
-use photomat_core::paths::absolute;
+use photomat_core::image_io::{PlanarImage, PngBits, write_png};
 use photomat_core::previews::map_previews;
 use photomat_core::sheet::grid;
 use photomat_core::{FolderLock, Highlight, lookup};
 use photomat_generator::GanModel;
+use photomat_train::RunLog;
 
-use super::config::TrainConfig;
+use super::settings::EstimatorSettings;
 use super::state::{TRAIN_MANIFEST_FILE, TRAIN_STATE_FILE, TrainManifest, copy_gan_model};
 use super::trainer::{EstimatorTrainer, StepReport};
-use crate::{EstimatorConfig, EstimatorModel};
+use crate::EstimatorModel;
 
-/// Default stage-1 steps for a new run (the paper trains 60 k; CPU runs set fewer).
-pub const DEFAULT_STEPS: u64 = 60_000;
-/// Default fine-tune steps for a new run (the paper trains 60 k).
-pub const DEFAULT_FINETUNE_STEPS: u64 = 60_000;
 /// Materials shown in each training panel.
 const PANEL_MATERIALS: u64 = 2;
 /// Key mixed into the run seed for the panels' fixed materials (distinct from every step's).
@@ -48,35 +44,6 @@ const PANEL_LIGHT: Highlight = Highlight { x: 0.2, y: 0.2 };
 pub const LOG_FILE: &str = "log.csv";
 /// `log.csv` header.
 const LOG_HEADER: &str = "step,stage,l1,gram,total,skipped,seconds";
-
-/// The settings of a run; `None` keeps the default (fresh run) or the saved value (resume).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct EstimatorSettings {
-    /// GAN model folder (required for a fresh run).
-    pub gan: Option<PathBuf>,
-    /// BRDF model specification E decodes into (required for a fresh run).
-    pub brdf: Option<String>,
-    /// Steps of stage 1.
-    pub steps: Option<u64>,
-    /// Steps of the fine-tune.
-    pub finetune_steps: Option<u64>,
-    /// Materials per step.
-    pub batch: Option<usize>,
-    /// Adam learning rate of stage 1.
-    pub lr: Option<f64>,
-    /// Adam learning rate of the fine-tune.
-    pub finetune_lr: Option<f64>,
-    /// VGG19 weights for the Gram loss (`None`: the seeded random conv bank).
-    pub vgg19: Option<PathBuf>,
-    /// Width multiplier of E's channels (fresh default 1).
-    pub width: Option<f64>,
-    /// Seed of the run.
-    pub seed: Option<u64>,
-    /// Steps between training panels ([`TrainConfig::cadence`]).
-    pub panel_every: Option<u64>,
-    /// Steps between checkpoints ([`TrainConfig::cadence`]).
-    pub checkpoint_every: Option<u64>,
-}
 
 /// How an [`EstimatorTraining::run`] ended.
 #[derive(Debug, Clone, PartialEq)]
@@ -100,7 +67,9 @@ pub struct EstimatorTraining {
     trainer: EstimatorTrainer,
     run: PathBuf,
     gan_dir: PathBuf,
-    log: std::fs::File,
+    log: RunLog,
+    /// What the merge of the settings noted ([`EstimatorSettings::merge`]).
+    notes: Vec<String>,
     // Held while the run is open: one writer per run folder.
     _lock: FolderLock,
 }
@@ -130,25 +99,29 @@ impl EstimatorTraining {
                 run.display()
             );
         }
-        let (trainer, gan_dir) = if resume {
-            resumed(run, settings, device)?
+        let saved = if resume {
+            Some((TrainManifest::load(run)?, run.join(TRAIN_MANIFEST_FILE)))
         } else {
-            fresh(settings, device)?
+            None
         };
+        let merged = settings.merge(saved.as_ref().map(|(m, f)| (m.clone(), f.as_path())))?;
+        let (trainer, gan_dir) = build_trainer(run, merged.config, resume, device)?;
+        let log_path = run.join(LOG_FILE);
         let log = if resume {
-            open_log(run, Some(trainer.steps_done()))?
+            RunLog::resume(&log_path, LOG_HEADER, trainer.steps_done())?
         } else {
             // The model folder is complete from the start: the GAN copy, E and the settings.
             copy_gan_model(&gan_dir, run)
                 .with_context(|| format!("cannot copy the GAN model into {}", run.display()))?;
             checkpoint(&trainer, run, &gan_dir)?;
-            open_log(run, None)?
+            RunLog::create(&log_path, LOG_HEADER)?
         };
         Ok(Self {
             trainer,
             run: run.to_path_buf(),
             gan_dir,
             log,
+            notes: merged.notes,
             _lock: lock,
         })
     }
@@ -161,6 +134,11 @@ impl EstimatorTraining {
     /// The GAN model folder E trains against.
     pub fn gan_dir(&self) -> &Path {
         &self.gan_dir
+    }
+
+    /// Lines for the user about the settings a resume changed (`note: …`).
+    pub fn notes(&self) -> &[String] {
+        &self.notes
     }
 
     /// Trains until the run's total or until `stop` is set (checked after each step), then
@@ -181,7 +159,7 @@ impl EstimatorTraining {
             })?;
             let seconds = t0.elapsed().as_secs_f64();
             seconds_total += seconds;
-            log_row(&mut self.log, &report, seconds)?;
+            self.log.append(&log_line(&report, seconds))?;
             progress(&report, seconds);
             let done = report.step;
             last = Some(report);
@@ -237,140 +215,43 @@ impl EstimatorTraining {
     }
 }
 
-/// `config` with every training setting that was given applied.
-fn apply_settings(mut config: TrainConfig, settings: &EstimatorSettings) -> TrainConfig {
-    if let Some(v) = settings.steps {
-        config.steps = v;
-    }
-    if let Some(v) = settings.finetune_steps {
-        config.finetune_steps = v;
-    }
-    if let Some(v) = settings.batch {
-        config.batch = v;
-    }
-    if let Some(v) = settings.lr {
-        config.lr = v;
-    }
-    if let Some(v) = settings.finetune_lr {
-        config.finetune_lr = v;
-    }
-    if let Some(v) = settings.seed {
-        config.seed = v;
-    }
-    if let Some(path) = &settings.vgg19 {
-        config.vgg19 = Some(absolute(path));
-    }
-    if let Some(v) = settings.panel_every {
-        config.cadence.panel_every = v;
-    }
-    if let Some(v) = settings.checkpoint_every {
-        config.cadence.checkpoint_every = v;
-    }
-    config
-}
-
-/// E's architecture for `gan` and a model of `channels` parameters at width `width`.
-fn architecture(gan: &GanModel, channels: usize, width: f64) -> anyhow::Result<EstimatorConfig> {
-    EstimatorConfig {
-        in_channels: gan.config().feature_channels,
-        out_channels: channels,
-        ..EstimatorConfig::default()
-    }
-    .with_width(width)
-    .context("invalid --width")
-}
-
-/// A new run from the settings, and its GAN folder.
-fn fresh(
-    settings: &EstimatorSettings,
-    device: &Device,
-) -> anyhow::Result<(EstimatorTrainer, PathBuf)> {
-    let Some(gan_dir) = settings.gan.as_deref().map(absolute) else {
-        bail!("--gan RUN is required for a new run (a `photomat train-gan` output folder)");
-    };
-    let Some(spec) = &settings.brdf else {
-        bail!("--brdf SPEC is required for a new run (`photomat brdfs` lists the models)");
-    };
-    let brdf = lookup(spec).context("invalid --brdf")?;
-    let gan = GanModel::load(&gan_dir, device)
-        .with_context(|| format!("cannot load the GAN model {}", gan_dir.display()))?;
-    let config = apply_settings(
-        TrainConfig {
-            steps: DEFAULT_STEPS,
-            finetune_steps: DEFAULT_FINETUNE_STEPS,
-            ..TrainConfig::default()
-        },
-        settings,
-    );
-    config
-        .validate(gan.config().resolution)
-        .context("invalid training settings")?;
-    let arch = architecture(&gan, brdf.channels(), settings.width.unwrap_or(1.0))?;
-    let model = EstimatorModel::new_seeded(brdf, arch, config.seed, device)?;
-    let trainer = EstimatorTrainer::new(gan, model, config)?;
-    Ok((trainer, gan_dir))
-}
-
-/// The run in `run`, after checking that no given setting contradicts its `train.json`.
-fn resumed(
+/// The trainer of the run `manifest` describes (E's weights seeded for a fresh run, loaded
+/// from `run`'s checkpoint for a resumed one), and its GAN folder.
+fn build_trainer(
     run: &Path,
-    settings: &EstimatorSettings,
+    manifest: TrainManifest,
+    resume: bool,
     device: &Device,
 ) -> anyhow::Result<(EstimatorTrainer, PathBuf)> {
-    let saved = TrainManifest::load(run)?;
     let file = run.join(TRAIN_MANIFEST_FILE);
-    let mut conflicts = Vec::new();
-    if let Some(gan) = settings.gan.as_deref().map(absolute)
-        && gan != saved.gan
-    {
-        conflicts.push(format!(
-            "--gan {} contradicts gan = {}",
-            gan.display(),
-            saved.gan.display()
-        ));
-    }
-    let brdf = lookup(&saved.brdf)
+    let brdf = lookup(&manifest.brdf)
         .with_context(|| format!("{}: the run's BRDF model cannot be built", file.display()))?;
-    if let Some(spec) = &settings.brdf {
-        let given = lookup(spec).context("invalid --brdf")?.name();
-        if given != saved.brdf {
-            conflicts.push(format!("--brdf {given} contradicts brdf = {}", saved.brdf));
-        }
-    }
-    let gan = GanModel::load(&saved.gan, device)
-        .with_context(|| format!("cannot load the run's GAN model {}", saved.gan.display()))?;
-    if let Some(width) = settings.width {
-        let given = architecture(&gan, brdf.channels(), width)?;
-        if given != saved.architecture {
-            conflicts.push(format!(
-                "--width {width} gives encoder widths {:?}, which contradicts the run's {:?}",
-                given.encoder_channels, saved.architecture.encoder_channels
-            ));
-        }
-    }
-    let config = apply_settings(saved.config.clone(), settings);
-    if let Err(e) = config.check_resume(&saved.config) {
-        conflicts.push(e.to_string());
-    }
-    if !conflicts.is_empty() {
-        bail!(
-            "cannot resume {}: {} (leave the flag out to keep the run's value)",
-            file.display(),
-            conflicts.join("; ")
-        );
-    }
-    config
+    let gan = GanModel::load(&manifest.gan, device)
+        .with_context(|| format!("cannot load the GAN model {}", manifest.gan.display()))?;
+    manifest
+        .config
         .validate(gan.config().resolution)
         .context("invalid training settings")?;
-    let model = EstimatorModel::new(
-        brdf,
-        saved.architecture.clone(),
-        candle_nn::VarMap::new(),
-        device,
-    )?;
-    let mut trainer = EstimatorTrainer::new(gan, model, config)?;
-    trainer.load_checkpoint(run)?;
-    Ok((trainer, saved.gan))
+    let model = if resume {
+        EstimatorModel::new(
+            brdf,
+            manifest.architecture.clone(),
+            candle_nn::VarMap::new(),
+            device,
+        )?
+    } else {
+        EstimatorModel::new_seeded(
+            brdf,
+            manifest.architecture.clone(),
+            manifest.config.seed,
+            device,
+        )?
+    };
+    let mut trainer = EstimatorTrainer::new(gan, model, manifest.config)?;
+    if resume {
+        trainer.load_checkpoint(run)?;
+    }
+    Ok((trainer, manifest.gan))
 }
 
 /// Writes the training state, E's model files and `train.json` into `run`.
@@ -380,39 +261,9 @@ fn checkpoint(trainer: &EstimatorTrainer, run: &Path, gan_dir: &Path) -> anyhow:
         .with_context(|| format!("cannot save the checkpoint in {}", run.display()))
 }
 
-/// Opens `run/log.csv` for appending: a new file with the header, or on resume the existing
-/// rows up to step `keep` (rows of steps after the checkpoint are dropped: they are redone).
-fn open_log(run: &Path, keep: Option<u64>) -> anyhow::Result<std::fs::File> {
-    let path = run.join(LOG_FILE);
-    let mut text = format!("{LOG_HEADER}\n");
-    if let Some(keep) = keep
-        && let Ok(old) = std::fs::read_to_string(&path)
-    {
-        text.push_str(&kept_rows(&old, keep));
-    }
-    write_atomic(&path, text.as_bytes())?;
-    std::fs::OpenOptions::new()
-        .append(true)
-        .open(&path)
-        .with_context(|| format!("cannot open {}", path.display()))
-}
-
-/// The data rows of the log text `old` (header skipped) whose step is at most `keep`.
-fn kept_rows(old: &str, keep: u64) -> String {
-    let mut text = String::new();
-    for line in old.lines().skip(1) {
-        let step = line.split(',').next().and_then(|s| s.parse::<u64>().ok());
-        if step.is_some_and(|s| s <= keep) {
-            text.push_str(line);
-            text.push('\n');
-        }
-    }
-    text
-}
-
-fn log_row(log: &mut std::fs::File, r: &StepReport, seconds: f64) -> anyhow::Result<()> {
-    writeln!(
-        log,
+/// The `log.csv` row of step report `r` that took `seconds`.
+fn log_line(r: &StepReport, seconds: f64) -> String {
+    format!(
         "{},{},{},{},{},{},{seconds:.4}",
         r.step,
         r.stage.name(),
@@ -421,33 +272,4 @@ fn log_row(log: &mut std::fs::File, r: &StepReport, seconds: f64) -> anyhow::Res
         r.total,
         r.skipped
     )
-    .context("cannot append to log.csv")
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn resumed_logs_keep_rows_up_to_the_checkpoint() {
-        let old = format!("{LOG_HEADER}\n1,aligned,0.1\n2,aligned,0.2\n3,finetune,0.3\n");
-        assert_eq!(kept_rows(&old, 2), "1,aligned,0.1\n2,aligned,0.2\n");
-        assert_eq!(kept_rows(&old, 0), "");
-    }
-
-    #[test]
-    fn settings_override_only_what_is_given() {
-        let base = TrainConfig::default();
-        assert_eq!(
-            apply_settings(base.clone(), &EstimatorSettings::default()),
-            base
-        );
-        let given = EstimatorSettings {
-            steps: Some(3),
-            seed: Some(9),
-            ..EstimatorSettings::default()
-        };
-        let c = apply_settings(base.clone(), &given);
-        assert_eq!((c.steps, c.seed, c.batch), (3, 9, base.batch));
-    }
 }

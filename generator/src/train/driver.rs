@@ -2,10 +2,10 @@
 //! total, and the run's cadence of checkpoints, `log.csv` rows, sample grids and SWD
 //! measurements (PhotoMat, Zhou et al. 2023, §3–4; StyleGAN2-ADA's training loop).
 //!
-//! [`GanTraining::plan`] turns [`GanSettings`] into the run's [`TrainConfig`]: a fresh run
-//! takes every setting (with the CPU-sized defaults), a resumed one keeps `train.json` and
-//! refuses a setting that contradicts it ([`RESUME_FIXED`] lists the fields that may not
-//! change; the data folder may move, the learning rate and the cadence of outputs may change).
+//! [`GanTraining::plan`] turns [`GanSettings`] into the run's [`TrainConfig`] ([`super::settings`]):
+//! a fresh run takes every setting (with the CPU-sized defaults), a resumed one keeps
+//! `train.json` and refuses a setting that contradicts it (the data folder may move, the
+//! learning rate and the cadence of outputs may change).
 //! The caller opens the training data the plan names (any [`TrainingData`]), then
 //! [`GanTraining::open`], which locks the folder, and [`GanTraining::run`], which stops after
 //! the current step when the stop flag is set (e.g. by a Ctrl-C handler) and reports to a
@@ -29,242 +29,20 @@ use anyhow::{Context, bail};
 use candle_core::Device;
 use photomat_core::FolderLock;
 use photomat_core::image_io::{PngBits, write_png};
-use photomat_core::paths::absolute;
+use photomat_train::RunLog;
 
-use super::config::{Cadence, TrainConfig};
+use super::config::TrainConfig;
 use super::data::TrainingData;
-use super::log::{LogRow, TrainLog};
+use super::log::{LOG_HEADER, LogRow};
 use super::samples::sample_grid;
+use super::settings::GanSettings;
 use super::state::{CONFIG_FILE, LOG_FILE, Restored, STATE_FILE, read_config};
 use super::trainer::{PhaseSeconds, StepStats, Trainer};
-use crate::relight::DEFAULT_RELIGHT_LOBES;
 use crate::swd::{FakeWindows, SwdConfig, SwdReport, model_swd};
-use crate::{GeneratorConfig, MAX_RESOLUTION, MIN_RESOLUTION, SpatialConfig};
 
-/// Default model side for a fresh run (CPU-sized).
-pub const DEFAULT_SIZE: usize = 64;
-/// Default channel multiplier for a fresh run (CPU-sized; the reference is 1).
-pub const DEFAULT_MULTIPLIER: f64 = 0.25;
-/// Default batch (the reference trains 32 on 8 GPUs; 4 keeps a CPU step in seconds).
-pub const DEFAULT_BATCH: usize = 4;
 /// Key mixed into the run seed for the SWD's fixed draws (one fixed set of fakes and reals
 /// per run, so successive measurements compare).
 const SWD_SEED_KEY: u64 = 0x7472_6169_6E5F_7377; // "train_sw"
-
-/// The settings of a run; `None` keeps the default (fresh run) or the saved value (resume).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct GanSettings {
-    /// Prepared data set folder (required for a fresh run; relocates it on resume).
-    pub data: Option<PathBuf>,
-    /// Model side, a power of two in 32 … 1024.
-    pub size: Option<usize>,
-    /// Channel multiplier of G and D.
-    pub multiplier: Option<f64>,
-    /// Dimension of z and w.
-    pub latent_dim: Option<usize>,
-    /// Images per step.
-    pub batch: Option<usize>,
-    /// Seed of the run.
-    pub seed: Option<u64>,
-    /// Tileable generator (`false`: not asked for).
-    pub tileable: bool,
-    /// Base learning rate.
-    pub lr: Option<f64>,
-    /// Path-length regularisation weight.
-    pub pl_weight: Option<f64>,
-    /// Learning-rate multiplier of M.
-    pub relight_lr_multiplier: Option<f64>,
-    /// R1 weight γ.
-    pub r1_gamma: Option<f64>,
-    /// Spatial (any-size) generator trained on native-scale patches (`false`: not asked for).
-    /// Implies a tileable generator (docs/conventions.md, "Spatial generator").
-    pub spatial: bool,
-    /// Channels of a spatial generator's local latents.
-    pub local_dim: Option<usize>,
-    /// Periodic waves of a spatial generator ([`SpatialConfig::waves`]).
-    pub waves: Option<usize>,
-    /// Probability that a training patch holds the photo's highlight.
-    pub highlight_prob: Option<f64>,
-    /// Weight of D's light-mismatch term ([`TrainConfig::light_mismatch`]).
-    pub light_mismatch: Option<f64>,
-    /// Exponents of M's Phong-lobe light input ([`GeneratorConfig::relight_lobes`]; empty:
-    /// the paper's M on F ‖ ω). Default for new runs [`DEFAULT_RELIGHT_LOBES`].
-    pub relight_lobes: Option<Vec<f64>>,
-    /// Leave out the per-pixel noise inputs ([`GeneratorConfig::noise_inputs`]; `false`: not
-    /// asked for).
-    pub no_noise: bool,
-    /// Gain of D's input sharpening ([`GeneratorConfig::d_input_sharpen`]).
-    pub d_sharpen: Option<f64>,
-    /// M shades in the frame of a learned relief ([`GeneratorConfig::relief`]; `false`: not
-    /// asked for). A resume may switch it on for a run without it.
-    pub relief: bool,
-    /// Steps between checkpoints ([`Cadence::checkpoint_every`]).
-    pub checkpoint_every: Option<u64>,
-    /// Steps between sample grids ([`Cadence::sample_every`]).
-    pub sample_every: Option<u64>,
-    /// Steps between SWD measurements ([`Cadence::swd_every`]).
-    pub swd_every: Option<u64>,
-    /// Images per SWD measurement ([`Cadence::swd_count`]).
-    pub swd_count: Option<u64>,
-    /// Steps between snapshots of G_ema + M ([`Cadence::snapshot_every`]).
-    pub snapshot_every: Option<u64>,
-}
-
-impl GanSettings {
-    /// `cadence` with every cadence setting that was given applied.
-    fn cadence_over(&self, cadence: Cadence) -> Cadence {
-        Cadence {
-            checkpoint_every: self.checkpoint_every.unwrap_or(cadence.checkpoint_every),
-            sample_every: self.sample_every.unwrap_or(cadence.sample_every),
-            swd_every: self.swd_every.unwrap_or(cadence.swd_every),
-            swd_count: self.swd_count.unwrap_or(cadence.swd_count),
-            snapshot_every: self.snapshot_every.unwrap_or(cadence.snapshot_every),
-        }
-    }
-}
-
-/// The settings that a resume may not change: (flag, field of `train.json`, the given value,
-/// the saved value), both as text. The exceptions ([`TrainConfig::with_resume_changes`]): the
-/// data folder may move, `--lr` may change (as a diverged run's message recommends) and so may
-/// the cadence of outputs.
-type FixedField = (
-    &'static str,
-    &'static str,
-    fn(&GanSettings) -> Option<String>,
-    fn(&TrainConfig) -> String,
-);
-
-/// Every setting fixed at the start of a run, with its command-line flag.
-pub const RESUME_FIXED: [FixedField; 17] = [
-    (
-        "--d-sharpen",
-        "generator.d_input_sharpen",
-        |s| s.d_sharpen.map(|v| v.to_string()),
-        |c| c.generator.d_input_sharpen.to_string(),
-    ),
-    (
-        "--no-noise",
-        "generator.noise_inputs",
-        |s| s.no_noise.then(|| "false".to_string()),
-        |c| c.generator.noise_inputs.to_string(),
-    ),
-    (
-        "--size",
-        "generator.resolution",
-        |s| s.size.map(|v| v.to_string()),
-        |c| c.generator.resolution.to_string(),
-    ),
-    (
-        "--multiplier",
-        "generator.channel_multiplier",
-        |s| s.multiplier.map(|v| v.to_string()),
-        |c| c.generator.channel_multiplier.to_string(),
-    ),
-    (
-        "--latent-dim",
-        "generator.latent_dim",
-        |s| s.latent_dim.map(|v| v.to_string()),
-        |c| c.generator.latent_dim.to_string(),
-    ),
-    (
-        "--relight-lr-multiplier",
-        "generator.relight_lr_multiplier",
-        |s| s.relight_lr_multiplier.map(|v| v.to_string()),
-        |c| c.generator.relight_lr_multiplier.to_string(),
-    ),
-    (
-        "--tileable",
-        "generator.tileable",
-        |s| s.tileable.then(|| "true".to_string()),
-        |c| c.generator.tileable.to_string(),
-    ),
-    (
-        "--spatial",
-        "generator.spatial",
-        |s| s.spatial.then(|| "true".to_string()),
-        |c| c.generator.spatial.is_some().to_string(),
-    ),
-    (
-        "--local-dim",
-        "generator.spatial.local_dim",
-        |s| s.local_dim.map(|v| v.to_string()),
-        |c| {
-            c.generator
-                .spatial
-                .as_ref()
-                .map_or("none".into(), |s| s.local_dim.to_string())
-        },
-    ),
-    (
-        "--waves",
-        "generator.spatial.waves",
-        |s| s.waves.map(|v| v.to_string()),
-        |c| {
-            c.generator
-                .spatial
-                .as_ref()
-                .map_or("none".into(), |s| s.waves.to_string())
-        },
-    ),
-    (
-        "--highlight-prob",
-        "patches.highlight_prob",
-        |s| s.highlight_prob.map(|v| v.to_string()),
-        |c| {
-            c.patches
-                .as_ref()
-                .map_or("none".into(), |p| p.highlight_prob.to_string())
-        },
-    ),
-    (
-        "--batch",
-        "batch",
-        |s| s.batch.map(|v| v.to_string()),
-        |c| c.batch.to_string(),
-    ),
-    (
-        "--seed",
-        "seed",
-        |s| s.seed.map(|v| v.to_string()),
-        |c| c.seed.to_string(),
-    ),
-    (
-        "--r1-gamma",
-        "r1_gamma",
-        |s| s.r1_gamma.map(|v| v.to_string()),
-        |c| c.r1_gamma.to_string(),
-    ),
-    (
-        "--pl-weight",
-        "pl_weight",
-        |s| s.pl_weight.map(|v| v.to_string()),
-        |c| c.pl_weight.to_string(),
-    ),
-    (
-        "--relight-lobes",
-        "generator.relight_lobes",
-        |s| s.relight_lobes.as_ref().map(|l| lobes_text(l)),
-        |c| lobes_text(&c.generator.relight_lobes),
-    ),
-    (
-        "--light-mismatch",
-        "light_mismatch",
-        |s| s.light_mismatch.map(|v| v.to_string()),
-        |c| c.light_mismatch.to_string(),
-    ),
-];
-
-/// Lobe exponents as `--relight-lobes` spells them: comma-separated, or `none`.
-pub fn lobes_text(lobes: &[f64]) -> String {
-    if lobes.is_empty() {
-        return "none".into();
-    }
-    lobes
-        .iter()
-        .map(|s| s.to_string())
-        .collect::<Vec<_>>()
-        .join(",")
-}
 
 /// How long a run trains.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -372,7 +150,7 @@ pub struct GanTraining {
     /// How a resumed run's state was restored (`None` for a fresh run).
     restored: Option<Restored>,
     run: PathBuf,
-    log: TrainLog,
+    log: RunLog,
     total: u64,
     device: Device,
     // Held while the run is open: one writer per run folder.
@@ -397,15 +175,17 @@ impl GanTraining {
                 run.display()
             );
         }
-        if resume {
-            resumed_config(run, settings)
+        let saved = if resume {
+            Some((read_config(run)?, run.join(CONFIG_FILE)))
         } else {
-            Ok(RunPlan {
-                config: fresh_config(settings)?,
-                resume,
-                notes: Vec::new(),
-            })
-        }
+            None
+        };
+        let merged = settings.merge(saved.as_ref().map(|(c, f)| (c.clone(), f.as_path())))?;
+        Ok(RunPlan {
+            config: merged.config,
+            resume,
+            notes: merged.notes,
+        })
     }
 
     /// Opens the run of `plan` in `run` (created and locked until the training is dropped: a
@@ -422,14 +202,14 @@ impl GanTraining {
             let restored = trainer.load_state(run)?;
             remove_snapshots_after(run, trainer.steps_done())?;
             (
-                TrainLog::resume(&log_path, trainer.steps_done())?,
+                RunLog::resume(&log_path, LOG_HEADER, trainer.steps_done())?,
                 Some(restored),
             )
         } else {
             // The configuration is on disk from the start, so a crash before the first
             // checkpoint still leaves a folder that says what it was.
             checkpoint(&trainer, run)?;
-            (TrainLog::create(&log_path)?, None)
+            (RunLog::create(&log_path, LOG_HEADER)?, None)
         };
         Ok(Self {
             trainer,
@@ -491,7 +271,7 @@ impl GanTraining {
             let done = self.trainer.steps_done();
             let kimg = self.trainer.images_seen() as f64 / 1000.0;
             let swd = self.swd_at(done, data, progress)?;
-            self.log.append(&LogRow {
+            let row = LogRow {
                 step: done,
                 kimg,
                 loss_g: stats.loss_g,
@@ -505,7 +285,8 @@ impl GanTraining {
                 path_length: stats.path_length,
                 lr: self.trainer.config().lr,
                 skipped: stats.skipped.clone(),
-            })?;
+            };
+            self.log.append(&row.line())?;
             progress(GanEvent::Step {
                 stats: &stats,
                 seconds,
@@ -620,156 +401,6 @@ impl GanTraining {
     }
 }
 
-/// The configuration of a fresh run from `settings`, with the reference hyper-parameters.
-fn fresh_config(settings: &GanSettings) -> anyhow::Result<TrainConfig> {
-    let Some(data) = &settings.data else {
-        bail!("--data DATASET is required for a new run (a prepared data set folder)");
-    };
-    let size = settings.size.unwrap_or(DEFAULT_SIZE);
-    if !size.is_power_of_two() || !(MIN_RESOLUTION..=MAX_RESOLUTION).contains(&size) {
-        bail!(
-            "--size {size} is not supported: use a power of two in {MIN_RESOLUTION} … \
-             {MAX_RESOLUTION} (32, 64, 128, 256, 512, 1024)"
-        );
-    }
-    let defaults = GeneratorConfig::default();
-    if !settings.spatial
-        && (settings.local_dim.is_some()
-            || settings.waves.is_some()
-            || settings.highlight_prob.is_some())
-    {
-        bail!(
-            "--local-dim, --waves and --highlight-prob configure a spatial generator: add \
-             --spatial"
-        );
-    }
-    let spatial = settings.spatial.then(|| SpatialConfig {
-        local_dim: settings
-            .local_dim
-            .unwrap_or(SpatialConfig::default().local_dim),
-        waves: settings.waves.unwrap_or(SpatialConfig::default().waves),
-        ..SpatialConfig::default()
-    });
-    let generator = GeneratorConfig {
-        resolution: size,
-        channel_multiplier: settings.multiplier.unwrap_or(DEFAULT_MULTIPLIER),
-        // A spatial G is translation-equivariant only with wrap-around padding.
-        tileable: settings.tileable || settings.spatial,
-        noise_inputs: !settings.no_noise,
-        relief: settings.relief,
-        d_input_sharpen: settings.d_sharpen.unwrap_or(defaults.d_input_sharpen),
-        spatial,
-        latent_dim: settings.latent_dim.unwrap_or(defaults.latent_dim),
-        relight_lr_multiplier: settings
-            .relight_lr_multiplier
-            .unwrap_or(defaults.relight_lr_multiplier),
-        relight_lobes: settings
-            .relight_lobes
-            .clone()
-            .unwrap_or_else(|| DEFAULT_RELIGHT_LOBES.to_vec()),
-        ..defaults
-    };
-    let mut config = TrainConfig::new(
-        generator,
-        absolute(data),
-        settings.batch.unwrap_or(DEFAULT_BATCH),
-        settings.seed.unwrap_or(0),
-    );
-    if let Some(lr) = settings.lr {
-        config.lr = lr;
-    }
-    config.cadence = settings.cadence_over(Cadence::default());
-    if let Some(w) = settings.pl_weight {
-        config.pl_weight = w;
-    }
-    if let Some(weight) = settings.light_mismatch {
-        config.light_mismatch = weight;
-    }
-    if let Some(gamma) = settings.r1_gamma {
-        config.r1_gamma = gamma;
-    }
-    if let (Some(p), Some(patches)) = (settings.highlight_prob, config.patches.as_mut()) {
-        patches.highlight_prob = p;
-    }
-    config
-        .validate()
-        .map_err(|e| anyhow::anyhow!("invalid training settings: {e}"))?;
-    Ok(config)
-}
-
-/// The saved configuration of `run`, after checking [`RESUME_FIXED`]. `data` relocates a data
-/// set that was moved since the run started (the photos are the user's to keep the same); the
-/// new path is saved at the next checkpoint.
-fn resumed_config(run: &Path, settings: &GanSettings) -> anyhow::Result<RunPlan> {
-    let mut saved = read_config(run)?;
-    let mut notes = Vec::new();
-    if let Some(data) = &settings.data {
-        let moved = absolute(data);
-        if moved != saved.data {
-            notes.push(format!(
-                "note: data set relocated from {} to {}",
-                saved.data.display(),
-                moved.display()
-            ));
-            saved.data = moved;
-        }
-    }
-    let conflicts: Vec<String> = RESUME_FIXED
-        .iter()
-        .filter_map(|(flag, field, given, fixed)| {
-            let (given, fixed) = (given(settings)?, fixed(&saved));
-            (given != fixed)
-                .then(|| format!("{flag} {given} contradicts {field} = {fixed} of the run"))
-        })
-        .collect();
-    if !conflicts.is_empty() {
-        bail!(
-            "cannot resume {}: {} (leave the flag out to keep the run's value)",
-            run.join(CONFIG_FILE).display(),
-            conflicts.join("; ")
-        );
-    }
-    if settings.relief && !saved.generator.relief {
-        notes.push(
-            "note: relief switched on: M's height projection starts at zero, so the model's \
-             outputs are unchanged until it trains"
-                .to_string(),
-        );
-        saved.generator.relief = true;
-    }
-    if let Some(lr) = settings.lr
-        && lr != saved.lr
-    {
-        notes.push(format!(
-            "note: learning rate {lr} from here on (the run had {}; log.csv's `lr` column \
-             records it per step)",
-            saved.lr
-        ));
-        saved.lr = lr;
-    }
-    let cadence = settings.cadence_over(saved.cadence);
-    if cadence != saved.cadence {
-        let snapshots = match cadence.snapshot_every {
-            0 => "no snapshots".to_string(),
-            every => format!("a snapshot every {every} steps"),
-        };
-        notes.push(format!(
-            "note: checkpoints every {}, samples every {}, SWD every {} steps on {} images, \
-             {snapshots} from here on",
-            cadence.checkpoint_every, cadence.sample_every, cadence.swd_every, cadence.swd_count,
-        ));
-        saved.cadence = cadence;
-    }
-    saved
-        .validate()
-        .map_err(|e| anyhow::anyhow!("invalid training settings: {e}"))?;
-    Ok(RunPlan {
-        config: saved,
-        resume: true,
-        notes,
-    })
-}
-
 /// The provenance recorded in the GAN model folder.
 fn provenance(trainer: &Trainer) -> serde_json::Value {
     let c = trainer.config();
@@ -841,6 +472,7 @@ fn checkpoint(trainer: &Trainer, run: &Path) -> anyhow::Result<()> {
 mod tests {
     use super::*;
     use crate::train::data::{FlashPlacement, RealBatch};
+    use crate::{GeneratorConfig, SpatialConfig};
 
     /// Training data that only knows its sample side.
     struct Side(f64);
@@ -898,29 +530,5 @@ mod tests {
         assert_eq!(RunLength::Kimg(0.008).steps(4).unwrap(), 2);
         assert!(RunLength::Kimg(0.0).steps(4).is_err());
         assert!(RunLength::Kimg(f64::NAN).steps(4).is_err());
-    }
-
-    #[test]
-    fn resume_table_names_every_contradicted_field() {
-        let saved = TrainConfig::new(GeneratorConfig::default(), PathBuf::from("d"), 4, 3);
-        let same = GanSettings {
-            batch: Some(4),
-            seed: Some(3),
-            ..GanSettings::default()
-        };
-        let changed = GanSettings {
-            batch: Some(8),
-            tileable: true,
-            ..same.clone()
-        };
-        let conflicts = |s: &GanSettings| -> Vec<&str> {
-            RESUME_FIXED
-                .iter()
-                .filter(|(_, _, given, fixed)| given(s).is_some_and(|g| g != fixed(&saved)))
-                .map(|(_, field, _, _)| *field)
-                .collect()
-        };
-        assert!(conflicts(&same).is_empty());
-        assert_eq!(conflicts(&changed), ["generator.tileable", "batch"]);
     }
 }

@@ -1,21 +1,12 @@
-//! The run's `log.csv`: one row per training step, appended as the run goes (a row is on disk
-//! as soon as its step ends), so a plot of a live run or of an interrupted one is always
-//! possible. Columns: [`LOG_HEADER`]; empty cells where a value was not computed that step
-//! (R1 every 16 steps, SWD every `--swd-every` steps, path length every 4 steps when on,
+//! The columns of a GAN run's `log.csv`, one row per training step: [`LOG_HEADER`]; empty
+//! cells where a value was not computed that step (R1 every 16 steps, SWD every `--swd-every` steps, path length every 4 steps when on,
 //! `light_gap` when the light-mismatch term is off; `skipped` lists the phases whose update a
 //! non-finite value skipped, `;`-separated). `lr` is the base learning rate of the step, which
 //! a resume may change. Logs of runs from before the later columns existed keep their shorter
 //! rows under the longer header.
 //!
-//! Resuming at S steps drops the rows of steps after S (written after the checkpoint the run
-//! resumes from), so the log reads as one uninterrupted run.
-
-use std::fs::{File, OpenOptions};
-use std::io::Write;
-use std::path::{Path, PathBuf};
-
-use candle_core::Result;
-use photomat_core::image_io::write_atomic;
+//! The file itself, and dropping the rows after the checkpoint when a run resumes, is
+//! [`photomat_train::RunLog`]'s.
 
 /// The header line.
 pub const LOG_HEADER: &str = "step,kimg,loss_g,loss_d,real_logit,fake_logit,logit_gap,r1,seconds,swd,\
@@ -78,69 +69,6 @@ impl LogRow {
     }
 }
 
-/// An open `log.csv`.
-pub struct TrainLog {
-    path: PathBuf,
-    file: File,
-}
-
-fn io_error(path: &Path, e: impl std::fmt::Display) -> candle_core::Error {
-    candle_core::Error::msg(format!("{}: {e}", path.display()))
-}
-
-impl TrainLog {
-    /// A new log at `path` (replacing any), header only.
-    pub fn create(path: &Path) -> Result<Self> {
-        Self::rewrite(path, &[])
-    }
-
-    /// Reopens `path` for a run resumed at `steps_done` steps: rows of later steps are
-    /// dropped; a missing log is started afresh.
-    pub fn resume(path: &Path, steps_done: u64) -> Result<Self> {
-        let text = match std::fs::read_to_string(path) {
-            Ok(t) => t,
-            Err(e) if e.kind() == std::io::ErrorKind::NotFound => String::new(),
-            Err(e) => return Err(io_error(path, e)),
-        };
-        let kept: Vec<&str> = text
-            .lines()
-            .skip(1)
-            .filter(|l| {
-                l.split(',')
-                    .next()
-                    .and_then(|s| s.parse::<u64>().ok())
-                    .is_some_and(|s| s <= steps_done)
-            })
-            .collect();
-        Self::rewrite(path, &kept)
-    }
-
-    fn rewrite(path: &Path, rows: &[&str]) -> Result<Self> {
-        let mut text = String::from(LOG_HEADER);
-        text.push('\n');
-        for r in rows {
-            text.push_str(r);
-            text.push('\n');
-        }
-        write_atomic(path, text.as_bytes()).map_err(candle_core::Error::wrap)?;
-        let file = OpenOptions::new()
-            .append(true)
-            .open(path)
-            .map_err(|e| io_error(path, e))?;
-        Ok(Self {
-            path: path.to_path_buf(),
-            file,
-        })
-    }
-
-    /// Appends one row and flushes it to the file.
-    pub fn append(&mut self, row: &LogRow) -> Result<()> {
-        writeln!(self.file, "{}", row.line())
-            .and_then(|()| self.file.flush())
-            .map_err(|e| io_error(&self.path, e))
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -168,29 +96,19 @@ mod tests {
     }
 
     #[test]
-    fn resume_drops_later_rows() {
-        let dir = tempfile::tempdir().unwrap();
-        let path = dir.path().join("log.csv");
-        let mut log = TrainLog::create(&path).unwrap();
-        for s in 1..=5 {
-            log.append(&row(s)).unwrap();
+    fn rows_fill_every_column_and_leave_uncomputed_cells_empty() {
+        let lines: Vec<String> = (1..=2).map(|s| row(s).line()).collect();
+        assert!(
+            lines[0].starts_with("1,0.004,0.7,1.3,0.5,-0.25,0.75,,1.500,"),
+            "{lines:?}"
+        );
+        assert!(
+            lines[1].ends_with(",0.0025,D loss is NaN;R1 gradient is not finite"),
+            "{lines:?}"
+        );
+        assert_eq!(lines[1].split(',').nth(7), Some("0.01"));
+        for line in &lines {
+            assert_eq!(line.split(',').count(), LOG_HEADER.split(',').count());
         }
-        drop(log);
-        let mut log = TrainLog::resume(&path, 3).unwrap();
-        log.append(&row(4)).unwrap();
-        let text = std::fs::read_to_string(&path).unwrap();
-        let lines: Vec<&str> = text.lines().collect();
-        assert_eq!(lines[0], LOG_HEADER);
-        assert_eq!(lines.len(), 5, "{text}");
-        assert!(
-            lines[4].starts_with("4,0.016,0.7,1.3,0.5,-0.25,0.75,0.01,1.500,"),
-            "{text}"
-        );
-        assert_eq!(lines[3].split(',').nth(7), Some(""));
-        assert!(
-            lines[2].ends_with(",0.0025,D loss is NaN;R1 gradient is not finite"),
-            "{text}"
-        );
-        assert_eq!(lines[0].split(',').count(), lines[1].split(',').count());
     }
 }
