@@ -1,7 +1,7 @@
 //! Single-thread BRDF evaluation throughput of the built-in models at 256² f32, in texels/s:
 //! the baseline that later work (fused kernels, GPU, allocators) improves on.
 //!
-//! Run (docs/benchmarks.md records the numbers):
+//! Run (docs/benchmarks/brdf-eval.md, "BRDF evaluation throughput", records the numbers):
 //!
 //! ```text
 //! RAYON_NUM_THREADS=1 cargo bench -p photomat-brdfs --bench eval_throughput

@@ -5,7 +5,7 @@
 //! wide the photographed square is at the flash's height ([`crate::square_side`]), hence the
 //! angles under which every texel saw the flash. A wrong one leaves a ghost of the photo's
 //! highlight in the maps: a simulated fabric photo (90°) captured at 67° relit with a bright
-//! crescent where the photo's highlight had been, faint at 90° (docs/benchmarks.md, "The
+//! crescent where the photo's highlight had been, faint at 90° (docs/benchmarks/capture.md, "The
 //! capture's field of view from EXIF").
 //!
 //! The EXIF records of the lens, and how each gives the field of view, are

@@ -50,8 +50,8 @@
 //! the better kept. Uniform maps cannot paint the highlight or the falloff in, so the lobe
 //! and the vignetting are set by the whole photo before the per-texel refinement starts
 //! from them; on simulated and Mitsuba-rendered photos this relit 25 % and 4 % better under
-//! held-out flashes (docs/benchmarks.md, "The direct capture's uniform warm-up"). The relief
-//! stays flat through the refinement unless [`CaptureOptions::relief`] asks for it,
+//! held-out flashes (docs/benchmarks/capture.md, "The direct capture's uniform warm-up"). The
+//! relief stays flat through the refinement unless [`CaptureOptions::relief`] asks for it,
 //! [`CaptureOptions::uniform_maps`] holds other named maps at one value as well, and
 //! [`CaptureOptions::known_maps`] holds maps known from elsewhere at their values (`held`).
 //!
@@ -149,7 +149,7 @@ pub struct CaptureOptions {
     pub fov_degrees: Option<f64>,
     /// Weight μ of the anchor `mean |θ − θ₀|` that holds the refined raw maps near the
     /// prior's; no effect without a prior. Default 0.05: on simulated photos it relit better
-    /// than 0 on two of three families tried, and better on their mean (docs/benchmarks.md,
+    /// than 0 on two of three families tried, and better on their mean (docs/benchmarks/capture.md,
     /// "`photomat capture` with the generator prior").
     pub anchor: f64,
     /// Steps of the uniform warm-up that a fit from constant maps starts with (module docs):
@@ -161,7 +161,7 @@ pub struct CaptureOptions {
     /// Fit the lens's vignetting ([`camera`]) in the warm-up and the refinement after it;
     /// otherwise, or when there is no warm-up (0 steps, or a prior), the photo is taken as
     /// free of it. Default on: free maps absorb a falloff texel by texel, uniform maps
-    /// cannot, so only a warm-up identifies it (docs/benchmarks.md, "The direct capture's
+    /// cannot, so only a warm-up identifies it (docs/benchmarks/capture.md, "The direct capture's
     /// uniform warm-up").
     pub vignetting: bool,
     /// Fit a dim, uniform ambient light ([`camera`]) in the warm-up and the refinement after
@@ -170,7 +170,7 @@ pub struct CaptureOptions {
     /// identifiable on a uniform material (both change the falloff's quadratic term), and on
     /// 8 simulated photos it relit 0.0750 → 0.0708 under held-out flashes, better on car
     /// paint, worse on stone; on 8 Mitsuba photos lit by the flash alone, 0.0398 → 0.0401
-    /// (docs/benchmarks.md, "A fitted ambient term").
+    /// (docs/benchmarks/capture.md, "A fitted ambient term").
     pub ambient: bool,
     /// Maps of the model fitted as one value over the whole square (e.g. `specular`,
     /// `roughness` of a material that varies in colour and relief only), so that they cannot
@@ -180,7 +180,7 @@ pub struct CaptureOptions {
     /// (1, channels, N, N) at the capture's [`Self::size`] and named as the model's maps:
     /// held at these values through the whole fit, so that the photo sets only the others.
     /// With the true diffuse, specular and roughness maps this measures how well one photo
-    /// determines the relief (docs/benchmarks.md, "The relief of one photo with the
+    /// determines the relief (docs/benchmarks/relief.md, "The relief of one photo with the
     /// reflectance known"). Names the model lacks, or a map also in
     /// [`Self::uniform_maps`], are errors. Default none.
     pub known_maps: Option<MaterialMaps>,
@@ -188,7 +188,7 @@ pub struct CaptureOptions {
     /// from constant maps. Default off: they are held uniform (flat normals), which relit
     /// simulated and Mitsuba-rendered photos 7 % and 20 % better under held-out flashes, and
     /// on the Mitsuba photos gave normals closer to the truth (12.6° against 18.1°) than
-    /// the relief one flash paints in (docs/benchmarks.md, "The direct capture's uniform
+    /// the relief one flash paints in (docs/benchmarks/capture.md, "The direct capture's uniform
     /// warm-up"). A capture with a prior keeps refining E's relief either way.
     pub relief: bool,
     /// Of the [`Self::steps`], how many run at the full size when the capture has a coarse
@@ -200,8 +200,8 @@ pub struct CaptureOptions {
     /// Smallest side of the coarse stage: the side is halved while the half is at least this
     /// and the side is even. Default 512 (1024² → 512², 2048² → 512²): at 512² a step took
     /// a fifth of a 1024² one's time on this project's 2-core machine, and the highlight's
-    /// lobe and the texture are still drawn (docs/benchmarks.md, "`photomat capture` at 1024²
-    /// with a coarse stage").
+    /// lobe and the texture are still drawn (docs/benchmarks/capture.md, "`photomat capture` at
+    /// 1024² with a coarse stage").
     pub coarse_min_size: usize,
 }
 
@@ -853,7 +853,7 @@ fn fit_uniform(input: &Input, brdf: &Brdf, options: &CaptureOptions) -> anyhow::
 /// ([`photomat_core::ParamSpec::default`], e.g. the 0.04 specular of a dielectric). On a
 /// Mitsuba-rendered brick photo the fit from the middle alone settled on a broad, strong
 /// lobe (specular ≈ 0.2, roughness 0.73) where a narrow, weak one fitted better
-/// (docs/benchmarks.md, "The direct capture's uniform warm-up"). Each start is C raw
+/// (docs/benchmarks/capture.md, "The direct capture's uniform warm-up"). Each start is C raw
 /// values, in the model's channel order.
 fn warmup_starts(brdf: &Brdf) -> Vec<Vec<f32>> {
     let middle = vec![0.0; brdf.channels()];

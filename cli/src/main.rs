@@ -2,10 +2,11 @@
 //!
 //! It runs on mimalloc instead of the system allocator: candle allocates a buffer per op and
 //! glibc's malloc makes those passes page-fault bound (`photomat_kernels::alloc`, measured in
-//! docs/benchmarks.md), keeping freed pages mapped (`keep_freed_pages`). Threads:
-//! `RAYON_NUM_THREADS`, else one per physical core, for GEMMs and the fused kernels; candle's
-//! element-wise ops run on the calling thread unless `CANDLE_NUM_THREADS` says otherwise
-//! (`photomat_kernels::threads`: candle's spinning pool slows every step on a busy machine).
+//! docs/benchmarks/threads-and-allocator.md, "Global allocator"), keeping freed pages mapped
+//! (`keep_freed_pages`). Threads: `RAYON_NUM_THREADS`, else one per physical core, for GEMMs and
+//! the fused kernels; candle's element-wise ops run on the calling thread unless
+//! `CANDLE_NUM_THREADS` says otherwise (`photomat_kernels::threads`: candle's spinning pool slows
+//! every step on a busy machine).
 
 #[global_allocator]
 static GLOBAL: photomat_kernels::alloc::FastAllocator = photomat_kernels::alloc::FastAllocator;

@@ -3,7 +3,7 @@
 //! normal counts) the spread of its angle from the mean normal. These are the numbers that
 //! say whether a generated material has the variation of real ones: flat normals show as a
 //! normal-angle spread near 0°, uniform roughness as a roughness std near 0
-//! (docs/benchmarks.md, "Map spread").
+//! (docs/benchmarks/bundled-model.md, "Size generalisation, map spread and noise inputs").
 //!
 //! `photomat map-stats DIR…` prints them for material folders.
 

@@ -3,7 +3,7 @@
 //! from photos of the same maps under the same flash with the relief removed (normal map +z,
 //! `photomat_data::relief_signature::without_relief`). Every 50 steps it prints D's mean logit
 //! gap (with relief − without) on held-out pairs. A D that cannot open this gap cannot ask G
-//! for relief, whatever the GAN's settings (`docs/benchmarks.md`, "Does M's relighting show
+//! for relief, whatever the GAN's settings (`docs/benchmarks/relief.md`, "Does M's relighting show
 //! relief?"; the same question for texture is `d_capacity`).
 //!
 //! ```text

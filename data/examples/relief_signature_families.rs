@@ -1,7 +1,7 @@
 //! The relief signature (`photomat_data::relief_signature`) of the simulator's families: each
 //! family's ground-truth maps rendered under the signature's two lights, once as they are and
 //! once with their relief removed (normal map +z, or height flat), for comparison with what
-//! `photomat eval-gan` reports for a model's relighting (`docs/benchmarks.md`, "Does M's
+//! `photomat eval-gan` reports for a model's relighting (`docs/benchmarks/relief.md`, "Does M's
 //! relighting show relief?").
 //!
 //! ```text

@@ -1,7 +1,7 @@
 //! What a training run's discriminator looks at: D's mean logit on real patches, on the same
 //! patches under other samples' lights, on the same patches blurred (their texture removed,
-//! their colour and highlight kept), and on G's fakes (docs/benchmarks.md, "What the GAN's
-//! discriminator looks at").
+//! their colour and highlight kept), and on G's fakes (docs/benchmarks/gan-training.md, "What the
+//! GAN's discriminator looks at").
 //!
 //! G learns only what D tells apart. A D that scores blurred reals like reals gives G no
 //! reason to make texture (grain, tiles, weave), however low the SWD goes; one that scores

@@ -1,6 +1,6 @@
 //! Whether a spatial GAN's relighting follows the light: the highlight detector run on M's
 //! images of generated materials under known flash positions, next to the same detector on
-//! real patches whose flash is known (docs/benchmarks.md, "Light following").
+//! real patches whose flash is known (docs/benchmarks/gan-training.md, "Light following").
 //!
 //! A GAN can lower its SWD while M ignores ω: every material then looks the same under every
 //! light, and its highlight (if any) sits wherever G painted it. Here each of `count`

@@ -1,6 +1,6 @@
 //! Whether a relighting shows relief: how much of the detail in the log-ratio of two images of
 //! one material, lit from either side of it, follows the derivative of the texture along the
-//! lights' axis (`docs/benchmarks.md`, "Does M's relighting show relief?").
+//! lights' axis (`docs/benchmarks/relief.md`, "Does M's relighting show relief?").
 //!
 //! Relief under a moved light: a texel tilted towards the light brightens, so the change
 //! between a light at +y and one at −y is, to first order, `∇h · (ω_a − ω_b)` — the height's

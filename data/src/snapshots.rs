@@ -2,12 +2,12 @@
 //!
 //! A GAN trained on these CPUs does not improve steadily: the bundled recipe's SWD moves by
 //! a quarter to a half between snapshots a thousand steps apart, and one `eval-gan` seed is
-//! noisy as well (two seeds of one model differ by up to half at 64 images; docs/benchmarks.md,
-//! "Picking a snapshot"). So a run keeps snapshots of G_ema + M (`train-gan --snapshot-every`,
-//! [`Cadence::snapshot_every`](photomat_generator::train::Cadence)) and this module scores
-//! each on several seeds of the SWD against the run's data set ([`model_swd`], the figure
-//! `eval-gan` reports for a seed: relit native-scale windows against real patches, ProGAN's
-//! sliced Wasserstein distance), then ranks them by the mean over the seeds.
+//! noisy as well (two seeds of one model differ by up to half at 64 images;
+//! docs/benchmarks/gan-training.md, "Picking a snapshot"). So a run keeps snapshots of G_ema + M
+//! (`train-gan --snapshot-every`, [`Cadence::snapshot_every`](photomat_generator::train::Cadence))
+//! and this module scores each on several seeds of the SWD against the run's data set
+//! ([`model_swd`], the figure `eval-gan` reports for a seed: relit native-scale windows against
+//! real patches, ProGAN's sliced Wasserstein distance), then ranks them by the mean over the seeds.
 //!
 //! Each measurement is kept in the model folder ([`SCORES_FILE`]) under a key naming the
 //! data set (its path and a hash of its index), the count, the seed and the metric's

@@ -7,7 +7,7 @@
 //! texels inside its im2col instead of building a padded copy (the same values as
 //! [`crate::circular_pad()`] followed by an unpadded conv). Forward + backward of E's layers
 //! got 2.0–5.0× faster than with candle's `conv2d` and the polyphase backward
-//! (`docs/benchmarks.md`, "Estimator layers").
+//! (`docs/benchmarks/conv-kernels.md`, "Estimator layers").
 //!
 //! Each layer keeps the size up to its stride ("same" convolution on the torus): a `k × k`
 //! kernel with stride `s` is padded by `(k − s)/2` on every side, so (H, W) → (H/s, W/s).

@@ -32,8 +32,9 @@
 //! high-pass boost in front of `fromrgb`. Texture on flash photos has a small amplitude next
 //! to the colour and the highlight, and a D started from unit-gain weights did not grow the
 //! gain to see it: trained on nothing but real patches against their blurred copies it reached
-//! a logit gap of 0.06 in 300 steps, against 3 in 50 steps with k = 9 (docs/benchmarks.md,
-//! "Can the discriminator learn texture at all?"). R1 is taken with respect to x, through it.
+//! a logit gap of 0.06 in 300 steps, against 3 in 50 steps with k = 9
+//! (docs/benchmarks/gan-training.md, "Can the discriminator learn texture at all?"). R1 is taken
+//! with respect to x, through it.
 //!
 //! Parameter names under `vb`: `b{r}.{fromrgb,conv0,conv1,skip}.{weight,bias}` for r = R … 8,
 //! `b4.{conv,fc,out}.{weight,bias}`.

@@ -206,8 +206,8 @@ pub struct GeneratorConfig {
     /// latents (as in the spatial texture GANs, Jetchev et al. 2016 and Bergmann et al. 2017,
     /// which have no noise inputs): the noise strength of the last 64² layer of the first
     /// spatial CPU run grew to 0.29, a per-texel speckle that M turned into coloured dots
-    /// (docs/benchmarks.md, "Noise inputs"). Absent from older `gan.json` files, and not
-    /// written when true.
+    /// (docs/benchmarks/bundled-model.md, "Size generalisation, map spread and noise inputs").
+    /// Absent from older `gan.json` files, and not written when true.
     #[serde(
         default = "noise_inputs_default",
         skip_serializing_if = "is_noise_default"

@@ -8,7 +8,7 @@
 //! renders under two lights the log-ratio's detail follows the texture itself (window R² 0.33),
 //! not its derivative along the lights' axis (0.009, against 0.012 across it), while the
 //! simulator's photos of fabric, leather, paint, stone and tiles give 0.18–0.50 along
-//! (`docs/benchmarks.md`, "Does M's relighting show relief?"). An estimator fitted to such
+//! (`docs/benchmarks/relief.md`, "Does M's relighting show relief?"). An estimator fitted to such
 //! renders rightly keeps its normals flat.
 //!
 //! With relief on, a zero-initialised linear projection of the features gives a height

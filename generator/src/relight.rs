@@ -14,7 +14,8 @@
 //! NCHW inputs and output without a concatenated copy; its backward is differentiable once
 //! more for path-length regularisation). Inside [`photomat_kernels::with_reference_ops`] (and
 //! on other devices) it is the candle composition: matrix products on (B·H·W, C) rows with the
-//! activation of [`crate::activation`] (`docs/benchmarks.md` compares the two).
+//! activation of [`crate::activation`] (`docs/benchmarks/fused-ops.md`, "The relighting MLP M as
+//! one fused per-texel op", compares the two).
 //!
 //! # Light input
 //! With `relight_lobes` = [s₁ … s_L] M reads F ‖ ω ‖ ω_z^{s₁} … ω_z^{s_L}. Under the

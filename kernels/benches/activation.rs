@@ -4,7 +4,7 @@
 //! `g·(1 − a)·relu(x) + g·a·x` of candle ops (the form measured fastest among candle
 //! compositions, `docs/candle-notes.md`, "Speed"), paired in one process.
 //!
-//! Run (docs/benchmarks.md, "Fused LeakyReLU", records the numbers):
+//! Run (docs/benchmarks/conv-kernels.md, "Fused LeakyReLU", records the numbers):
 //!
 //! ```text
 //! cargo bench -p photomat-kernels --features mimalloc --bench activation

@@ -1,6 +1,6 @@
 //! System allocator vs mimalloc on candle element-wise backward passes, in one process.
 //!
-//! Run (docs/benchmarks.md, "Global allocator", records the numbers):
+//! Run (docs/benchmarks/threads-and-allocator.md, "Global allocator", records the numbers):
 //!
 //! ```text
 //! cargo bench -p photomat-kernels --features mimalloc --bench allocator

@@ -1,7 +1,8 @@
 //! photomat's im2col + gemm `conv2d` against candle 0.11's `conv2d`, at the project's shapes,
 //! in one process.
 //!
-//! Run (docs/benchmarks.md, "conv2d: photomat-kernels vs candle", records the numbers):
+//! Run (docs/benchmarks/conv-kernels.md, "conv2d: photomat-kernels vs candle", records the
+//! numbers):
 //!
 //! ```text
 //! cargo bench -p photomat-kernels --features mimalloc --bench conv

@@ -2,7 +2,7 @@
 //! batch 4), forward + backward: its previous path against [`photomat_kernels::conv2d`], paired in
 //! one process.
 //!
-//! Run (docs/benchmarks.md, "Estimator layers", records the numbers):
+//! Run (docs/benchmarks/conv-kernels.md, "Estimator layers", records the numbers):
 //!
 //! ```text
 //! cargo bench -p photomat-kernels --features mimalloc --bench estimator_layers

@@ -3,11 +3,11 @@
 //! **Allocator.** candle 0.11 allocates a fresh output buffer for every op. With glibc's
 //! malloc, buffers above the dynamic mmap threshold (≤ 32 MiB) are mapped and unmapped per
 //! call or trimmed off the heap top, so element-wise passes spend much of their time in page
-//! faults (`docs/benchmarks.md`, "BRDF evaluation throughput"; `docs/candle-notes.md`, "Speed").
-//! mimalloc (Leijen, Zorn & de Moura, "Mimalloc: free list sharding in action", APLAS 2019) keeps
-//! freed pages mapped and reuses them. Measured here on element-wise backward passes it is faster
-//! by the ratios in `docs/benchmarks.md` ("Global allocator"), bench
-//! `kernels/benches/allocator.rs`.
+//! faults (`docs/benchmarks/brdf-eval.md`, "BRDF evaluation throughput"; `docs/candle-notes.md`,
+//! "Speed"). mimalloc (Leijen, Zorn & de Moura, "Mimalloc: free list sharding in action", APLAS
+//! 2019) keeps freed pages mapped and reuses them. Measured here on element-wise backward passes it
+//! is faster by the ratios in `docs/benchmarks/threads-and-allocator.md` ("Global allocator"),
+//! bench `kernels/benches/allocator.rs`.
 //!
 //! A library must not pick the process allocator, so this is an opt-in for binaries: enable
 //! the `mimalloc` feature of `photomat-kernels` and add
@@ -25,7 +25,8 @@
 //! candle's element-wise pool only, `CANDLE_NUM_THREADS`). [`thread_count`] reports it. Keep
 //! the default on a dedicated machine; on a machine shared with other jobs, set
 //! `RAYON_NUM_THREADS` to the cores you may use: candle's element-wise pool spin-waits, so
-//! more threads than free cores is slower than fewer (`docs/benchmarks.md`).
+//! more threads than free cores is slower than fewer (`docs/benchmarks/threads-and-allocator.md`,
+//! "Global allocator").
 
 /// The fast global allocator for binaries: mimalloc (see the module docs).
 #[cfg(feature = "mimalloc")]
@@ -39,9 +40,9 @@ const MI_OPTION_PURGE_DELAY: libmimalloc_sys::mi_option_t = 15;
 /// Tells mimalloc never to return freed pages to the OS. By default it purges them a second
 /// after they are freed (v3's default delay), and candle's next op faults them back in, zero-filled by the kernel: 29 % of
 /// a one-thread G step was `clear_page_erms`, and no purging cut the step's page faults from
-/// 37 254 to 1 085 and its CPU time by 27 % (`docs/benchmarks.md`, "photomat vs PyTorch CPU").
-/// The price is a resident size that stays at the peak, which training processes reach
-/// anyway. Call it first thing in `main` of a binary that uses [`FastAllocator`].
+/// 37 254 to 1 085 and its CPU time by 27 % (`docs/benchmarks/pytorch.md`, "photomat vs PyTorch
+/// CPU, whole steps and ops"). The price is a resident size that stays at the peak, which training
+/// processes reach anyway. Call it first thing in `main` of a binary that uses [`FastAllocator`].
 #[cfg(feature = "mimalloc")]
 pub fn keep_freed_pages() {
     // SAFETY: mi_option_set only stores an integer in mimalloc's option table.
@@ -51,9 +52,9 @@ pub fn keep_freed_pages() {
 /// A buffer of `len` elements for an op's output that the op writes whole before anything
 /// reads it: allocated without the zero-fill that `vec![0; len]` pays for. With mimalloc
 /// keeping freed pages ([`keep_freed_pages`]) that fill was a memset of every output, 8–9 % of
-/// a training step's samples (`docs/benchmarks.md`, "Outputs without a zero-fill"). candle's
-/// own CPU ops get their outputs the same way (`alloc_uninit` of its CPU device). Builds with
-/// debug assertions (the test profile) fill the buffer with NaN instead, so that an element an
+/// a training step's samples (`docs/benchmarks/fused-ops.md`, "Outputs without a zero-fill").
+/// candle's own CPU ops get their outputs the same way (`alloc_uninit` of its CPU device). Builds
+/// with debug assertions (the test profile) fill the buffer with NaN instead, so that an element an
 /// op forgets to write fails the equivalence tests rather than reading stale memory.
 ///
 /// # Safety

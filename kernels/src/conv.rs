@@ -26,10 +26,10 @@
 //!
 //! On CPUs with AVX-512, f32 convolutions other than pointwise ones run on the direct kernels
 //! of [`crate::direct_conv`] instead, which read a padded copy of the input in place rather
-//! than `col(x)` (`docs/benchmarks.md`, "A direct convolution kernel"): forwards whose output
-//! rows are at least 16 texels wide, the input gradients of such stride-1 convolutions, and
-//! weight gradients over at least 1024 output texels. Pointwise convolutions (whose `col(x)`
-//! is `x` itself), strided input gradients, narrow layers and f64 stay here.
+//! than `col(x)` (`docs/benchmarks/conv-kernels.md`, "A direct convolution kernel"): forwards whose
+//! output rows are at least 16 texels wide, the input gradients of such stride-1 convolutions, and
+//! weight gradients over at least 1024 output texels. Pointwise convolutions (whose `col(x)` is `x`
+//! itself), strided input gradients, narrow layers and f64 stay here.
 //!
 //! CPU tensors of dtype f32 and f64 take this path; other devices and dtypes fall back to
 //! [`conv2d_reference`] (candle's `conv2d`, circular padding by `narrow` + `cat`), as does
@@ -46,8 +46,8 @@ use crate::direct_conv;
 /// Target size of one band of `col(x)`: half a core's L2 (1 MiB on the build machine), so that
 /// the band is still in L2 when `gemm` packs it, while `gemm` still sees ≥ a few hundred
 /// columns (≈ 227 for a 3×3 64-channel f32 layer). Measured against 256 KiB … 8 MiB on the
-/// bench's steps and convs (`docs/benchmarks.md`, "The band of `col(x)` sized to L2"): it
-/// took 0.81–0.98× the time of the 2 MiB chosen before from the cache sizes alone.
+/// bench's steps and convs (`docs/benchmarks/conv-kernels.md`, "The band of `col(x)` sized to L2"):
+/// it took 0.81–0.98× the time of the 2 MiB chosen before from the cache sizes alone.
 pub const COL_TILE_BYTES: usize = 512 << 10;
 
 /// How the border of the input is extended.
@@ -504,7 +504,8 @@ fn over_batch<R: Send>(
 
 /// Whether the direct kernels of [`crate::direct_conv`] may run: yes unless the environment
 /// variable `PHOTOMAT_NO_DIRECT_CONV` is set, which sends every convolution to im2col + `gemm`
-/// (same-binary A/B measurements, `docs/benchmarks.md`). Read once per process.
+/// (same-binary A/B measurements, `docs/benchmarks/conv-kernels.md`, "A direct convolution
+/// kernel"). Read once per process.
 fn direct_conv_enabled() -> bool {
     static ENABLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     *ENABLED.get_or_init(|| std::env::var_os("PHOTOMAT_NO_DIRECT_CONV").is_none())
@@ -534,7 +535,7 @@ fn as_f32<'a, T: WithDType>(
 /// Bands of output rows write disjoint parts of `y`, so when the batch is smaller than the
 /// thread count (sampling one material, E at full resolution) and there are enough bands, the
 /// (image, band) pairs are the parallel tasks, each with single-threaded `gemm`: gemm's own
-/// threading splits each band's small product and scales poorly (`docs/benchmarks.md`,
+/// threading splits each band's small product and scales poorly (`docs/benchmarks/conv-kernels.md`,
 /// "Bands as the parallel tasks of a one-image conv").
 pub(crate) fn forward_into<T: WithDType>(
     g: &Geometry,

@@ -38,7 +38,7 @@
 //! Only f32 on CPUs with AVX-512F take this path, and not pointwise convolutions, which `gemm`
 //! already reads in place (`supports_forward`, `supports_input_grad`, `supports_weight_grad`);
 //! everything else stays on im2col + `gemm`, which the equivalence tests compare it with.
-//! Measurements: `docs/benchmarks.md`, "A direct convolution kernel".
+//! Measurements: `docs/benchmarks/conv-kernels.md`, "A direct convolution kernel".
 
 use rayon::prelude::*;
 
@@ -543,7 +543,7 @@ const WG_BAND_BYTES: usize = 32 << 10;
 /// Fewest output texels (over the batch) for the direct weight gradient: below, its fixed
 /// costs per weight (the channels-last sums, zeroed, then transposed back) outweigh the
 /// `2·texels` FLOP each weight takes, and im2col + `gemm` writes the weights in place (the
-/// estimator's 4² and 8² layers; `docs/benchmarks.md`, "A direct convolution kernel").
+/// estimator's 4² and 8² layers; `docs/benchmarks/conv-kernels.md`, "A direct convolution kernel").
 const WG_MIN_TEXELS: usize = 1024;
 
 /// Whether [`weight_grad`] computes this convolution's weight gradient: every f32 geometry

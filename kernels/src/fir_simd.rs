@@ -17,8 +17,8 @@
 //! interleaves its two phases' vectors into 32 consecutive outputs (two permutes). The rows
 //! are short (17–65 outputs in the discriminator), so nothing is allocated per row and the
 //! last vector is masked. Slice loops the compiler vectorised on its own were slower than
-//! the scalar dot products (`docs/benchmarks.md`, "Strided input gradients on the direct
-//! kernels", tried and not adopted): the baseline x86-64 target vectorises only 4 wide, and
+//! the scalar dot products (`docs/benchmarks/conv-kernels.md`, "Strided input gradients on the
+//! direct kernels", tried and not adopted): the baseline x86-64 target vectorises only 4 wide, and
 //! the per-row setup ate the rest.
 
 use crate::avx512::{LANES, has_avx512, lane_mask};

@@ -3,7 +3,8 @@
 //! Fast CPU kernels for photomat's networks, as candle 0.11 custom ops, each with
 //! its backward pass. candle's own CPU path runs this project's layers 5–8× slower than
 //! PyTorch CPU (`docs/candle-notes.md`, "Speed"); the generator and the estimator call these ops
-//! instead where they measure faster (numbers in `docs/benchmarks.md`).
+//! instead where they measure faster (today's numbers in `docs/results.md`, their history in
+//! `docs/benchmarks/`).
 //!
 //! - [`conv2d`]: im2col + `gemm` convolution with zero or circular padding, forward, input
 //!   gradient and weight gradient each a custom op, differentiable to any order ([`conv`]).

@@ -12,13 +12,14 @@
 //! equalised learning rate of Karras et al. 2018 §4.1). Composed from candle ops this is one
 //! transpose and concatenation of the NCHW inputs into rows, per layer a scaled weight, its
 //! transpose, a matrix product, a bias and an activation pass, and a transpose back — with as
-//! many passes again backward (`docs/benchmarks.md` measured it at 2.7–4.3× PyTorch's CPU
-//! time). Here the rows are processed in blocks of [`BLOCK_ROWS`] texels, each block running
-//! the whole chain while its activations are in L2: the block's inputs are gathered straight
-//! from the NCHW tensors (the `F ‖ ω` concatenation exists only block by block), every layer
-//! is one `gemm` call on row-major activations against the weights arranged once per call,
-//! bias and activation run on the cache-hot block right after it, and the last layer writes
-//! the NCHW output. Blocks run in parallel on rayon's pool.
+//! many passes again backward (measured at 2.7–4.3× PyTorch's CPU time:
+//! `docs/benchmarks/pytorch.md`, "photomat vs PyTorch CPU, re-measured with this session's
+//! thread defaults"). Here the rows are processed in blocks of [`BLOCK_ROWS`] texels, each
+//! block running the whole chain while its activations are in L2: the block's inputs are
+//! gathered straight from the NCHW tensors (the `F ‖ ω` concatenation exists only block by
+//! block), every layer is one `gemm` call on row-major activations against the weights
+//! arranged once per call, bias and activation run on the cache-hot block right after it, and
+//! the last layer writes the NCHW output. Blocks run in parallel on rayon's pool.
 //!
 //! The forward keeps the hidden activations (only when an input is tracked, so inference
 //! keeps none) for the backward, which runs the chain in reverse per block: input gradients

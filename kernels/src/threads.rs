@@ -8,10 +8,10 @@
 //! machine, a worker that the OS has descheduled keeps the caller spinning for a whole time
 //! slice at every op: 82 % of a photo capture's profile was those two spin loops, and the
 //! capture took 5–6× as long as with one candle thread. On the idle machine one candle
-//! thread costs 0–7 % per step (`docs/benchmarks.md`, "candle's spinning element-wise pool"
-//! and "`train-gan` step time"), because the time is in GEMMs and fused kernels, which keep
-//! `RAYON_NUM_THREADS` threads, which [`fix_rayon_thread_count`] writes down once; a run that
-//! has the machine to itself may set `CANDLE_NUM_THREADS=2`.
+//! thread costs 0–7 % per step (`docs/benchmarks/threads-and-allocator.md`, "candle's spinning
+//! element-wise pool" and "`train-gan` step time"), because the time is in GEMMs and fused kernels,
+//! which keep `RAYON_NUM_THREADS` threads, which [`fix_rayon_thread_count`] writes down once; a run
+//! that has the machine to itself may set `CANDLE_NUM_THREADS=2`.
 
 /// Elements from which this crate's element-wise passes split over rayon tasks of this size;
 /// smaller tensors run on the calling thread. candle splits its own element-wise ops from the

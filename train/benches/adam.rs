@@ -1,7 +1,8 @@
 //! One Adam step over the maps of a 1024² capture (diffuse, specular, roughness, height:
 //! 8 channels, 8 Mi f32 values) and over a CPU-sized GAN's parameters (4 Mi values in 64
 //! tensors): the fused in-place update against the composed candle ops that
-//! [`photomat_kernels::with_reference_ops`] selects (docs/benchmarks.md, "Fused Adam").
+//! [`photomat_kernels::with_reference_ops`] selects (docs/benchmarks/conv-kernels.md, "Fused
+//! Adam").
 
 use candle_core::{DType, Device, Tensor, Var};
 use criterion::{Criterion, criterion_group, criterion_main};

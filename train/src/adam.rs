@@ -21,7 +21,7 @@
 //! operations above (PyTorch's `fused` Adam does the same on CUDA). Composed from candle ops
 //! the same update is eleven passes that each allocate their result; that path remains for
 //! other devices and dtypes and runs inside [`photomat_kernels::with_reference_ops`]
-//! (`docs/benchmarks.md`, "Fused Adam"; bench `train/benches/adam.rs`).
+//! (`docs/benchmarks/conv-kernels.md`, "Fused Adam"; bench `train/benches/adam.rs`).
 //!
 //! [`AdamConfig::lazy`] applies StyleGAN2's lazy-regularisation correction (Karras et al. 2020,
 //! Appendix B / `training_loop.py`): a network regularised every k steps uses

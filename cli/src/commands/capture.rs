@@ -78,7 +78,8 @@ pub struct Args {
     /// else the bundled models/demo): the generator inverted to the photo, its material
     /// decoded by the estimator for --brdf. Off by default: on simulated photos of the eight
     /// families the bundled model's prior relit better on five and worse on three (fabric,
-    /// paint, tiles), worse on average, at 3–4× the time (docs/benchmarks.md).
+    /// paint, tiles), worse on average, at 3–4× the time (docs/benchmarks/capture.md, "`photomat
+    /// capture` with the generator prior").
     #[arg(long)]
     pub prior: bool,
 

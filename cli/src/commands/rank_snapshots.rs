@@ -36,8 +36,8 @@ pub struct Args {
     pub data: Option<PathBuf>,
 
     /// Seeds per snapshot (0 … N−1), one SWD each. One seed can misrank: two seeds of one
-    /// model differ by up to half at 64 images (docs/benchmarks.md, "Picking a snapshot").
-    /// At most 64: beyond that the seeds' mean moves less than the snapshots differ.
+    /// model differ by up to half at 64 images (docs/benchmarks/gan-training.md, "Picking a
+    /// snapshot"). At most 64: beyond that the seeds' mean moves less than the snapshots differ.
     #[arg(long, value_name = "N", default_value_t = 4,
           value_parser = clap::value_parser!(u64).range(1..=64))]
     pub seeds: u64,

@@ -12,9 +12,9 @@
 //! `robust` is the default: its mean error is below the paper's both on photos of photomat's
 //! simulator (0.82 % against 1.71 % of the width, 320 photos) and on photos that Mitsuba
 //! rendered from real texture photos with a tilted perspective camera and an offset flash
-//! (1.76 % against 1.99 %, largest 4.8 %; `validation/`, docs/benchmarks.md, "Highlight
-//! detectors on independent photos"). It takes the paper's centroid as a second opinion when
-//! its own fit is far from it and implausible (`robust.rs`, "Second opinion").
+//! (1.76 % against 1.99 %, largest 4.8 %; `validation/`, docs/benchmarks/highlight-detector.md,
+//! "Highlight detectors on independent photos"). It takes the paper's centroid as a second
+//! opinion when its own fit is far from it and implausible (`robust.rs`, "Second opinion").
 //!
 //! Both take a display-encoded (gamma 2.2) image in [0, 1] with 1, 3 or 4 channels (alpha is
 //! ignored) and return a [`Detection`]: the highlight in continuous pixel coordinates (pixel

@@ -59,7 +59,8 @@
 //! brushed metal 1.27 / 1.17 (the streak of sparse glints is the model's weak case), car paint
 //! 0.10 / 0.56, fabric 0.72 / 1.65, leather 0.18 / 0.44, paint 0.33 / 1.84, stone 0.95 / 2.26,
 //! tiles 1.30 / 1.82 (wavy glaze tilts the specular spot off the flash point), wood 0.16 / 1.54.
-//! On 320 photos of each kind (docs/benchmarks.md): overhead simulator 0.73 / 4.9 against
+//! On 320 photos of each kind (docs/benchmarks/highlight-detector.md, "Highlight detector: censored
+//! clipping and a blended second opinion"): overhead simulator 0.73 / 4.9 against
 //! 1.71 / 14.8, the phone-pose simulator 1.05 / 9.5 against 1.88 / 14.3, Mitsuba renders of
 //! texture photos (48) 1.51 / 4.5 against 1.99 / 4.3.
 //! Test `robust_beats_paper_on_simulated_photos` (independent camera model, 48 photos at 512²):
@@ -81,7 +82,8 @@
 //! and a fit that explains the photo within noise (relative misfit below 0.5 %) keeps its
 //! place without it. On photos rendered by Mitsuba from texture photos (`validation/`) the
 //! second opinion takes the largest error from 13.7 % to 4.5 % of the width
-//! (docs/benchmarks.md, "Highlight detector: censored clipping and a blended second opinion").
+//! (docs/benchmarks/highlight-detector.md, "Highlight detector: censored clipping and a blended
+//! second opinion").
 //!
 //! # Failure rule
 //! Falls back to the image centre, with the reason, when the flash does not dominate: the
@@ -141,7 +143,8 @@ const ARBITER_BOX: f64 = 0.08;
 /// Relative difference of the two positions' local contrasts below which the second opinion
 /// cannot tell them apart ([`centroid_share`]): 15 %, chosen on the simulated sets, where
 /// 15–20 % give the same errors and 10 % leaves one photo beyond 5 % of the width
-/// (docs/benchmarks.md, "Highlight detector: censored clipping and a blended second opinion").
+/// (docs/benchmarks/highlight-detector.md, "Highlight detector: censored clipping and a blended
+/// second opinion").
 const ARBITER_TIE: f64 = 0.15;
 
 /// Relative misfit ([`FlashFit::misfit`]) below which the model explains the photo and the

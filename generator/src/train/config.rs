@@ -121,8 +121,8 @@ impl Default for Cadence {
 /// Default [`TrainConfig::light_mismatch`]. Without the term, D conditioned on ω by
 /// concatenation alone let M ignore the light: a 13-kimg spatial run and a 6.4-kimg fixed-size
 /// run on real photos rendered every material the same under all four preview lights
-/// (docs/benchmarks.md, "Light following"). With weight 1 a real under wrong lights weighs as
-/// much as a fake.
+/// (docs/benchmarks/gan-training.md, "Light following"). With weight 1 a real under wrong lights
+/// weighs as much as a fake.
 pub const DEFAULT_LIGHT_MISMATCH: f64 = 1.0;
 
 /// How a spatial G trains on patches (docs/conventions.md, "Training patches").
