@@ -6,7 +6,9 @@
 //! [`mod@render`]er with its per-texel vector algebra ([`vecops`], fused in [`texel_ops`]), the
 //! material-map folder format ([`map_files`]), the seeded random generator every crate draws
 //! from ([`rng`]), the conformance kit every plugin's tests run ([`testing`]) and the
-//! derivative checks of fused ops' tests ([`op_derivatives`]).
+//! derivative checks of fused ops' tests ([`op_derivatives`]); and the rules every command
+//! that writes files follows: locked folders ([`folder_lock`]), results replaced whole or not
+//! at all ([`output_folder`]), memory checked before it is spent ([`memory`]).
 //!
 //! Models live in `photomat-brdfs` (and in users' own crates); each declares itself once
 //! with [`register_brdf!`] and is built by name with [`lookup`]:
@@ -29,9 +31,11 @@ pub mod lobes;
 pub mod map_files;
 pub mod map_stats;
 pub mod maps;
+pub mod memory;
 pub mod microfacet;
 pub mod model;
 pub mod op_derivatives;
+pub mod output_folder;
 pub mod param;
 pub mod paths;
 pub mod plugin_spec;
@@ -54,6 +58,7 @@ pub use folder_lock::FolderLock;
 pub use lights::LightSet;
 pub use maps::MaterialMaps;
 pub use model::{ModelBrdf, Reflectance};
+pub use output_folder::{OutputFolder, ResultKind};
 pub use param::{ColorSpace, Encoding, ParamSpec};
 pub use plugin_spec::{ArgValue, PluginSpec};
 pub use registry::{
