@@ -86,6 +86,13 @@ pub struct SaveOptions {
     pub compact: bool,
     /// What [`crate::simplify::simplify`] did, recorded as the manifest's `simplification`.
     pub simplification: Option<serde_json::Value>,
+    /// Where the maps came from (e.g. a material library's package, files and licences),
+    /// recorded as the manifest's `source`.
+    pub source: Option<serde_json::Value>,
+    /// Write no EXR: every 1- and 3-channel map is stored as its PNG alone (what loading falls
+    /// back to), for collections of maps whose sources were 8-bit images anyway, such as a
+    /// material library. Maps of other channel counts still get their EXR.
+    pub png_only: bool,
 }
 
 /// The `material.json` manifest.
@@ -119,6 +126,10 @@ pub struct MapManifest {
     /// ([`crate::simplify`]). Informational; omitted otherwise.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub simplification: Option<serde_json::Value>,
+    /// Where the maps came from, when the writer recorded it (a material library's package,
+    /// source files, version and licences). Informational; omitted otherwise.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub source: Option<serde_json::Value>,
 }
 
 /// One map of a [`MapManifest`].
@@ -288,12 +299,13 @@ fn plan_folder(
         let stored = if grey { 1 } else { spec.channels };
         let has_files = value.is_none();
         let png = (has_files && matches!(stored, 1 | 3)).then(|| format!("{}.png", spec.name));
+        let exr = has_files && !(options.png_only && png.is_some());
         entries.push(MapEntry {
             name: spec.name.to_string(),
             channels: spec.channels,
             png_bits: png.as_ref().map(|_| options.png_bits),
             png,
-            exr: has_files.then(|| format!("{}.exr", spec.name)),
+            exr: exr.then(|| format!("{}.exr", spec.name)),
             color_space: spec.color_space,
             range: [spec.range.0, spec.range.1],
             value,
@@ -314,6 +326,7 @@ fn plan_folder(
         maps: entries,
         selection: options.selection.clone(),
         simplification: options.simplification.clone(),
+        source: options.source.clone(),
     };
     Ok(PlannedFolder {
         manifest,
