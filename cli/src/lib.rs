@@ -26,6 +26,8 @@
 //!   Jacobians) of a model at given directions and parameters, as JSON on stdout;
 //! - `photomat simulate --count N --size S --out DIR [--seed K] [--format jpg|png]`: phone-flash
 //!   photos of procedural materials with ground-truth maps and highlights;
+//! - `photomat library import SRC… --out LIB`: artist-made texture sets of game-data packages
+//!   → a material library (maps, provenance, licences, splits);
 //! - `photomat prepare --photos DIR --out DATASET [--size 512] [--detector robust|paper]`: flash
 //!   photos → square images, highlights, index.json and report.txt;
 //! - `photomat eval-detector --dataset DIR [--detector NAME]`: highlight error per family;
@@ -77,6 +79,8 @@ enum Command {
     BrdfEval(commands::brdf_eval::Args),
     /// Simulate phone-flash photos of procedural materials, with their ground truth.
     Simulate(commands::simulate::Args),
+    /// Material libraries of artist-made SVBRDF maps: `photomat library import SRC… --out LIB`.
+    Library(commands::library::Args),
     /// Prepare a folder of flash photos as a dataset: square images, highlights, report.
     Prepare(commands::prepare::Args),
     /// Measure the highlight detectors against a simulated dataset's true highlights.
@@ -111,6 +115,7 @@ impl Command {
             Command::MapStats(args) => commands::map_stats::run(args, out),
             Command::BrdfEval(args) => commands::brdf_eval::run(args, out),
             Command::Simulate(args) => commands::simulate::run(args, out),
+            Command::Library(args) => commands::library::run(args, out),
             Command::Prepare(args) => commands::prepare::run(args, out),
             Command::EvalDetector(args) => commands::eval_detector::run(args, out),
             Command::TrainGan(args) => commands::train_gan::run(args, out),

@@ -7,6 +7,7 @@ pub mod capture;
 pub mod demo;
 pub mod eval_detector;
 pub mod eval_gan;
+pub mod library;
 pub mod map_stats;
 pub mod prepare;
 pub mod rank_snapshots;
