@@ -13,8 +13,9 @@
 //! files of atomic writes found there ([`is_temporary_file`]) are garbage from a writer that
 //! was killed mid-write: [`FolderLock::acquire`] removes them.
 //!
-//! A command that would mix its outputs with an earlier run's in the same folder refuses, or
-//! with `--overwrite` removes the earlier ones first ([`clear_previous_outputs`]).
+//! A command whose result is one folder (a capture, samples, a study) writes it through
+//! [`crate::output_folder::OutputFolder`], which locks its staging folder and refuses to mix
+//! two results.
 
 use std::fs::{File, OpenOptions, TryLockError};
 use std::io::{Read, Seek, SeekFrom, Write};
@@ -133,33 +134,6 @@ fn remove_temporary_files(dir: &Path) -> Result<Vec<PathBuf>> {
     }
     removed.sort();
     Ok(removed)
-}
-
-/// Clears what an earlier run left in the output folder `dir`: the files and folders of
-/// `previous` are removed when `overwrite`; without it a non-empty `previous` is an error
-/// naming `dir`, with `refusal()` as its reason (what the folder holds and how to go on).
-/// Nothing else in `dir` is touched.
-pub fn clear_previous_outputs(
-    dir: &Path,
-    previous: &[PathBuf],
-    overwrite: bool,
-    refusal: impl FnOnce() -> String,
-) -> Result<()> {
-    if previous.is_empty() {
-        return Ok(());
-    }
-    if !overwrite {
-        return Err(Error::file(dir, refusal()));
-    }
-    for path in previous {
-        let removed = if path.is_dir() {
-            std::fs::remove_dir_all(path)
-        } else {
-            std::fs::remove_file(path)
-        };
-        removed.map_err(|e| Error::file(path, format!("cannot remove: {e}")))?;
-    }
-    Ok(())
 }
 
 #[cfg(test)]

@@ -59,9 +59,6 @@ pub fn decode_limits() -> image::Limits {
     limits
 }
 
-/// The sheet layouts, re-exported under their former path.
-pub use crate::sheet::{CONTACT_SHEET_GAP, contact_sheet, contact_sheet_grid};
-
 /// Bit depth of a written PNG. Serialised as the number 8 or 16.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
 #[serde(try_from = "u8", into = "u8")]

@@ -6,7 +6,8 @@
 //! [`mod@render`]er with its per-texel vector algebra ([`vecops`], fused in [`texel_ops`]), the
 //! material-map folder format ([`map_files`]), the seeded random generator every crate draws
 //! from ([`rng`]), the conformance kit every plugin's tests run ([`testing`]) and the
-//! derivative checks of fused ops' tests ([`op_derivatives`]); and the rules every command
+//! derivative checks of fused ops' tests ([`op_derivatives`]); the spread of a material's maps
+//! ([`map_stats`]) and the distance between two sets' distributions of it ([`map_distribution`]); and the rules every command
 //! that writes files follows: locked folders ([`folder_lock`]), results replaced whole or not
 //! at all ([`output_folder`]), memory checked before it is spent ([`memory`]).
 //!
@@ -28,6 +29,7 @@ pub mod folder_lock;
 pub mod image_io;
 pub mod lights;
 pub mod lobes;
+pub mod map_distribution;
 pub mod map_files;
 pub mod map_stats;
 pub mod maps;

@@ -37,6 +37,10 @@ pub struct ResultKind {
     /// The names of the entries the command writes; a trailing `*` matches any rest
     /// (`seed-*`). The lock file is always one of them.
     pub entries: &'static [&'static str],
+    /// Entries (among `entries`) that a new result takes over from the old one instead of
+    /// replacing, e.g. a cache of trained models that later runs reuse: a claim moves them into
+    /// the staging folder, and a claim after a killed run moves them back first.
+    pub kept: &'static [&'static str],
 }
 
 impl ResultKind {
@@ -164,6 +168,10 @@ impl OutputFolder {
             drop(lock);
             lock = FolderLock::acquire(&staging, kind.command)?;
         }
+        // A process that locked the output itself (a run writing there) holds it too.
+        if output.join(LOCK_FILE).exists() {
+            drop(FolderLock::acquire(output, kind.command)?);
+        }
         let held = entries(output)?;
         let foreign: Vec<&String> = held.iter().filter(|n| !kind.writes(n)).collect();
         if !foreign.is_empty() {
@@ -180,9 +188,12 @@ impl OutputFolder {
                 ),
             ));
         }
+        // A kept entry alone (a cache of an interrupted first run) is not a result.
         let results: Vec<&String> = held
             .iter()
-            .filter(|n| *n != LOCK_FILE && *n != COMPLETE_MARKER)
+            .filter(|n| {
+                *n != LOCK_FILE && *n != COMPLETE_MARKER && !kind.kept.contains(&n.as_str())
+            })
             .collect();
         let replaces = !results.is_empty();
         if replaces && !overwrite {
@@ -198,7 +209,16 @@ impl OutputFolder {
                 ),
             ));
         }
-        // A killed writer's leftovers: the staging folder starts empty but for its lock.
+        // A killed writer's kept entries go back to the output first (they are the previous
+        // result's), then its leftovers go: the staging folder starts empty but for its lock.
+        for name in kind.kept {
+            let (inside, back) = (staging.join(name), output.join(name));
+            if inside.exists() && !back.exists() {
+                std::fs::create_dir_all(output)
+                    .map_err(|e| Error::file(output, format!("cannot create: {e}")))?;
+                rename(&inside, &back)?;
+            }
+        }
         for name in entries(&staging)? {
             if name == LOCK_FILE {
                 continue;
@@ -210,6 +230,12 @@ impl OutputFolder {
                 std::fs::remove_file(&path)
             };
             removed.map_err(|e| Error::file(&path, format!("cannot remove a stale file: {e}")))?;
+        }
+        for name in kind.kept {
+            let from = output.join(name);
+            if from.exists() {
+                rename(&from, &staging.join(name))?;
+            }
         }
         Ok(Self {
             output: output.to_path_buf(),
@@ -292,7 +318,8 @@ mod tests {
     const KIND: ResultKind = ResultKind {
         what: "a capture",
         command: "photomat capture",
-        entries: &["capture.json", "material", "seed-*"],
+        entries: &["capture.json", "material", "seed-*", "cache"],
+        kept: &["cache"],
     };
 
     fn write_result(dir: &Path, tag: &str) {
@@ -395,6 +422,32 @@ mod tests {
         recover(&out).unwrap();
         assert_eq!(read(&out).0, "new");
         assert!(!old.exists());
+    }
+
+    #[test]
+    fn kept_entries_carry_over_and_survive_a_killed_run() {
+        let root = tempfile::tempdir().unwrap();
+        let out = root.path().join("study");
+        // A first run killed mid-way: its cache is in the staging folder.
+        let first = OutputFolder::claim(&out, KIND, false).unwrap();
+        std::fs::create_dir(first.path().join("cache")).unwrap();
+        std::fs::write(first.path().join("cache").join("model"), "trained").unwrap();
+        drop(first);
+        // The next claim finds it (an unfinished cache is no result: no --overwrite needed),
+        // carries it over, and the commit puts it in place with the new result.
+        let second = OutputFolder::claim(&out, KIND, false).unwrap();
+        assert!(!second.replaces());
+        let cached = second.path().join("cache").join("model");
+        assert_eq!(std::fs::read_to_string(&cached).unwrap(), "trained");
+        write_result(second.path(), "new");
+        second.commit().unwrap();
+        assert_eq!(
+            std::fs::read_to_string(out.join("cache").join("model")).unwrap(),
+            "trained"
+        );
+        // A later run replacing the result keeps the cache too.
+        let third = OutputFolder::claim(&out, KIND, true).unwrap();
+        assert!(third.path().join("cache").join("model").exists());
     }
 
     #[test]

@@ -13,6 +13,10 @@
 //!
 //! - [`Estimator`] / [`EstimatorConfig`]: the UNet ([`unet`]).
 //! - [`EstimatorModel`] ([`model_files`]): a trained E on disk with the BRDF it decodes into.
+//! - [`map_distribution`]: the statistics of E's maps of sampled materials, to compare with
+//!   real materials' (`photomat eval-gan --library`).
+//! - [`model_choice`]: which of a model folder's estimators a material gets (`--brdf SPEC|auto`
+//!   of `photomat sample` and `photomat capture`).
 //! - [`loss`]: the Gram (VGG19 or seeded random-feature fallback) and L1 losses of §3.
 //! - [`train`]: the two-stage training against a frozen `GanModel` (aligned, then rolled
 //!   fine-tune), resumable, behind `photomat train-estimator`.
@@ -52,6 +56,8 @@
 
 pub mod conv;
 pub mod loss;
+pub mod map_distribution;
+pub mod model_choice;
 pub mod model_files;
 pub mod sample;
 pub mod trade;

@@ -9,8 +9,9 @@
 use std::path::{Path, PathBuf};
 
 use candle_core::{Device, IndexOp};
-use photomat_core::image_io::{CONTACT_SHEET_GAP, read_png};
+use photomat_core::image_io::read_png;
 use photomat_core::map_files::load_maps;
+use photomat_core::sheet::CONTACT_SHEET_GAP;
 use photomat_estimator::EstimatorModel;
 use photomat_estimator::sample::SHEET_MAX_TILE;
 use photomat_generator::GanModel;

@@ -237,18 +237,27 @@ fn sample_is_deterministic_per_seed_and_writes_loadable_outputs() {
     assert!(timings.contains("generate") && timings.contains("total"));
 
     // A second run into the same folder would mix with the first: refused, unless
-    // --overwrite, which leaves only the new run's seed folders.
+    // --overwrite, which replaces the result whole (only the new run's seed folders remain).
+    // A file sample does not write makes the folder someone else's: refused even then.
     let again = ["--model", model, "--count", "1", "--seed", "9", "--out"];
     let err = sample(&[&again[..], &[a.to_str().unwrap()]].concat()).unwrap_err();
     let err = format!("{err:#}");
     assert!(
         err.contains(&a.display().to_string())
-            && err.contains("2 seed folder")
+            && err.contains("seed-0007")
             && err.contains("--overwrite"),
         "{err}"
     );
     assert!(a.join("seed-0007").exists());
     std::fs::write(a.join("notes.txt"), b"mine").unwrap();
+    let err = sample(&[&again[..], &[a.to_str().unwrap(), "--overwrite"]].concat()).unwrap_err();
+    let err = format!("{err:#}");
+    assert!(
+        err.contains("notes.txt") && err.contains("does not write"),
+        "{err}"
+    );
+    assert!(a.join("notes.txt").exists() && a.join("seed-0007").exists());
+    std::fs::remove_file(a.join("notes.txt")).unwrap();
     sample(&[&again[..], &[a.to_str().unwrap(), "--overwrite"]].concat()).unwrap();
     let seeds: Vec<String> = std::fs::read_dir(&a)
         .unwrap()
@@ -256,10 +265,6 @@ fn sample_is_deterministic_per_seed_and_writes_loadable_outputs() {
         .filter(|n| n.starts_with("seed-"))
         .collect();
     assert_eq!(seeds, ["seed-0009"]);
-    assert!(
-        a.join("notes.txt").exists(),
-        "--overwrite removed a file it did not write"
-    );
 
     // While another process (here: a lock this test holds) writes the folder, sample fails
     // at once naming the holder.

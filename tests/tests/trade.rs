@@ -94,6 +94,38 @@ fn trade_writes_table_json_and_plot_and_reuses_its_estimators() -> anyhow::Resul
     assert_eq!((w, h), (960, 640));
     assert!(first_out.join("maps/lambert/material.json").is_file());
 
+    // The same folder again: refused without --overwrite; with it the study is replaced
+    // whole, so the first study's other models leave no maps behind.
+    let lambert_only = [
+        "trade",
+        "--gan",
+        s(&gan),
+        "--brdfs",
+        "lambert",
+        "--out",
+        s(&first_out),
+        "--cache",
+        s(&cache),
+        "--steps",
+        "2",
+        "--finetune-steps",
+        "1",
+        "--width",
+        "0.125",
+        "--materials",
+        "2",
+    ];
+    let err = photomat_error(&lambert_only);
+    assert!(
+        err.contains("already holds a trade study") && err.contains("--overwrite"),
+        "{err}"
+    );
+    photomat(&[&lambert_only[..], &["--overwrite"]].concat())?;
+    let maps: Vec<String> = std::fs::read_dir(first_out.join("maps"))?
+        .map(|e| e.map(|e| e.file_name().to_string_lossy().into_owned()))
+        .collect::<Result<_, _>>()?;
+    assert_eq!(maps, ["lambert"]);
+
     // Same settings: every estimator comes from the cache, with the same accuracy.
     let second_out = dir.path().join("t2");
     let second = study(s(&gan), s(&second_out), s(&cache), "2")?;

@@ -406,6 +406,55 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
         std::fs::read(best_folder.join("gan.safetensors")).unwrap()
     );
 
+    // --best-to never replaces a model without asking, nor writes into a folder holding more
+    // than a GAN model (a model folder with its estimators, such as a copy of the bundled one).
+    let best_again = [
+        "rank-snapshots",
+        path_str(&run),
+        "--seeds",
+        "1",
+        "--count",
+        "8",
+    ];
+    let err = photomat_error(&[&best_again[..], &["--best-to", path_str(&best)]].concat());
+    assert!(
+        err.contains("already holds a GAN model") && err.contains("--overwrite"),
+        "{err}"
+    );
+    photomat(
+        &[
+            &best_again[..],
+            &["--best-to", path_str(&best), "--overwrite"],
+        ]
+        .concat(),
+    )
+    .unwrap();
+    let model = dir.path().join("model");
+    std::fs::create_dir(&model).unwrap();
+    std::fs::write(model.join("estimator.json"), "{}").unwrap();
+    let err = photomat_error(
+        &[
+            &best_again[..],
+            &["--best-to", path_str(&model), "--overwrite"],
+        ]
+        .concat(),
+    );
+    assert!(
+        err.contains("estimator.json") && err.contains("does not write"),
+        "{err}"
+    );
+    assert!(!model.join("gan.json").exists());
+    // A damaged train.json is reported as what it is, not as a missing --data.
+    let damaged = dir.path().join("damaged");
+    std::fs::create_dir_all(damaged.join("snapshots")).unwrap();
+    std::fs::write(damaged.join("train.json"), "{ not json").unwrap();
+    copy_folder(&snapshot(1), &damaged.join("snapshots/step-000001"));
+    let err = photomat_error(&["rank-snapshots", path_str(&damaged)]);
+    assert!(
+        err.contains("train.json") && !err.contains("give the data set"),
+        "{err}"
+    );
+
     // Every measurement is kept in its snapshot: ranking again with a third seed measures only
     // that one (a kept value, altered here, is reported as kept), and other weights in the
     // folder discard what was kept for the old ones.
@@ -487,4 +536,13 @@ fn snapshots_are_kept_and_ranked_by_eval_gan_over_seeds() {
     train(Some(&data), &plain, &flags).unwrap();
     let err = photomat_error(&["rank-snapshots", path_str(&plain)]);
     assert!(err.contains("--snapshot-every"), "{err}");
+}
+
+/// Copies the files of the folder `from` into `to` (created).
+fn copy_folder(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for entry in std::fs::read_dir(from).unwrap() {
+        let entry = entry.unwrap();
+        std::fs::copy(entry.path(), to.join(entry.file_name())).unwrap();
+    }
 }

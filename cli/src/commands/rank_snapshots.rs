@@ -12,17 +12,10 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use anyhow::Context;
-use photomat_core::image_io::write_atomic;
-use photomat_data::snapshots::{ScoreSettings, SnapshotScore, ranked, run_snapshots, score_models};
-use photomat_generator::model_files::copy_gan_model;
-use photomat_generator::train::SNAPSHOTS_DIR;
-use photomat_generator::train::state::read_config;
+use photomat_data::ranking::{RankSettings, rank_run};
+use photomat_data::snapshots::SnapshotScore;
 
 use crate::common::progress_bar;
-
-/// The ranking's file in the run's snapshot folder.
-const RANKING_FILE: &str = "ranking.json";
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -48,10 +41,14 @@ pub struct Args {
           value_parser = clap::value_parser!(u64).range(1..=1_000_000))]
     pub count: u64,
 
-    /// Copy the best snapshot's gan.json + gan.safetensors into this folder (created if
-    /// missing).
+    /// Copy the best snapshot's gan.json + gan.safetensors into this folder, a new GAN model
+    /// folder (one holding other files, e.g. a model folder with estimators, is refused).
     #[arg(long, value_name = "DIR")]
     pub best_to: Option<PathBuf>,
+
+    /// Replace the GAN model in the --best-to folder.
+    #[arg(long, requires = "best_to")]
+    pub overwrite: bool,
 
     /// Print the ranking as JSON instead of a table.
     #[arg(long)]
@@ -59,88 +56,45 @@ pub struct Args {
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let folders = run_snapshots(&args.run)?;
-    let data = match &args.data {
-        Some(data) => data.clone(),
-        None => {
-            read_config(&args.run)
-                .context("give the data set with --data DATASET")?
-                .data
-        }
-    };
-    let settings = ScoreSettings {
-        data,
+    let settings = RankSettings {
+        run: args.run.clone(),
+        data: args.data.clone(),
         count: args.count as usize,
-        seeds: (0..args.seeds).collect(),
+        seeds: args.seeds,
+        best_to: args.best_to.clone(),
+        overwrite: args.overwrite,
     };
     let bar = progress_bar(
-        folders.len() as u64 * args.seeds,
+        0,
         "{elapsed_precise} [{bar:40}] {pos}/{len} SWD measurements ({eta} left)",
     );
-    let per_model = args.seeds;
-    let scores = score_models(&folders, &settings, &mut |model, seeds_done| {
-        bar.set_position(model as u64 * per_model + seeds_done as u64)
+    let ranking = rank_run(&settings, &mut |done, total| {
+        bar.set_length(total);
+        bar.set_position(done);
     });
     bar.finish_and_clear();
-    let scores = scores.with_context(|| {
-        format!(
-            "cannot score the snapshots of '{}' against '{}'",
-            args.run.display(),
-            settings.data.display()
-        )
-    })?;
-    for unscored in &scores.unscored {
+    let ranking = ranking?;
+    for unscored in &ranking.unscored {
         eprintln!(
             "warning: {} not ranked: {}",
             unscored.folder.display(),
             unscored.error
         );
     }
-    if scores.scored.is_empty() {
-        anyhow::bail!(
-            "none of the {} snapshots of '{}' could be scored (above)",
-            folders.len(),
-            args.run.display()
-        );
-    }
-    let unscored = scores.unscored;
-    let scores = ranked(scores.scored);
-
-    let report = serde_json::json!({
-        "data": settings.data,
-        "count": settings.count,
-        "seeds": settings.seeds,
-        "ranking": scores,
-        "unscored": unscored,
-    });
-    let text = serde_json::to_string_pretty(&report)?;
-    let ranking_path = args.run.join(SNAPSHOTS_DIR).join(RANKING_FILE);
-    write_atomic(&ranking_path, text.as_bytes())
-        .with_context(|| format!("cannot write {}", ranking_path.display()))?;
-
-    let best = &scores[0];
-    if let Some(dir) = &args.best_to {
-        copy_gan_model(&best.folder, dir).with_context(|| {
-            format!(
-                "cannot copy the best snapshot {} to {}",
-                best.folder.display(),
-                dir.display()
-            )
-        })?;
-    }
     if args.json {
-        writeln!(out, "{text}")?;
-    } else {
-        print_table(&scores, &settings.seeds, out)?;
-        writeln!(out, "ranking written to {}", ranking_path.display())?;
-        if let Some(dir) = &args.best_to {
-            writeln!(
-                out,
-                "best: {} copied to {}",
-                best.folder.display(),
-                dir.display()
-            )?;
-        }
+        writeln!(out, "{}", serde_json::to_string_pretty(&ranking.report)?)?;
+        return Ok(());
+    }
+    print_table(&ranking.ranking, &ranking.settings.seeds, out)?;
+    writeln!(out, "ranking written to {}", ranking.ranking_path.display())?;
+    if let Some(dir) = &args.best_to {
+        let best = &ranking.ranking[0];
+        writeln!(
+            out,
+            "best: {} copied to {}",
+            best.folder.display(),
+            dir.display()
+        )?;
     }
     Ok(())
 }

@@ -10,6 +10,7 @@
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::Ordering;
 
 use anyhow::bail;
 use candle_core::Device;
@@ -18,7 +19,7 @@ use photomat_estimator::sample::{
     SampleOptions, SampleSummary, Sampler,
 };
 
-use crate::common::{model_dir, progress_bar};
+use crate::common::{interruption, model_dir, progress_bar, stop_flag};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -82,8 +83,8 @@ pub struct Args {
           value_parser = clap::value_parser!(u32).range(8..=4096))]
     pub size_render: Option<u32>,
 
-    /// Replace the samples already in --out (its seed-* folders, contact_sheet.png and
-    /// summary.json; nothing else); without it a folder holding samples is refused.
+    /// Replace the samples already in --out, whole; without it a folder holding samples is
+    /// refused (and one holding files a sample run does not write is refused always).
     #[arg(long)]
     pub overwrite: bool,
 
@@ -113,6 +114,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     if !(args.psi.is_finite()) {
         bail!("--psi must be a finite number, got {}", args.psi);
     }
+    // The model is checked by name before any model folder loads.
+    let brdf = match &args.brdf {
+        Some(text) => BrdfChoice::parse(text, args.tolerance)?,
+        None => BrdfChoice::Default,
+    };
     let dir = model_dir(args.model.as_deref())?;
     let sampler = Sampler::open(&dir, &Device::Cpu)?;
     let options = SampleOptions {
@@ -126,24 +132,34 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         size: args.size.map(|s| s as usize),
         render_size: args.size_render.map(|s| s as usize),
         overwrite: args.overwrite,
-        brdf: match &args.brdf {
-            Some(text) => BrdfChoice::parse(text, args.tolerance)?,
-            None => BrdfChoice::Default,
-        },
+        brdf,
         simplify: args.simplify.then_some(args.tolerance),
     };
     let bar = progress_bar(
         args.count as u64,
         "{elapsed_precise} [{bar:40}] {pos}/{len} materials ({per_sec}, {eta} left)",
     );
-    let summary = sampler.run(&options, &args.out, &mut |event| {
+    let stop = stop_flag()?;
+    let result = sampler.run(&options, &args.out, &mut |event| {
+        if stop.load(Ordering::SeqCst) {
+            anyhow::bail!("stopped");
+        }
         match event {
             SampleEvent::Note(line) => bar.suspend(|| writeln!(out, "{line}"))?,
             SampleEvent::Material { .. } => bar.inc(1),
         }
         Ok(())
-    })?;
+    });
     bar.finish_and_clear();
+    if stop.load(Ordering::SeqCst) {
+        eprintln!(
+            "interrupted: nothing was written; {} is as it was. Run the same command again to \
+             sample",
+            args.out.display()
+        );
+        return Err(interruption().into());
+    }
+    let summary = result?;
     report(args, &dir, &summary, out)
 }
 

@@ -59,9 +59,13 @@ pub struct Args {
     pub size: Option<u32>,
 
     /// Folder of the trained estimators, reused by later runs with the same GAN and settings
-    /// [default: OUT/estimators].
+    /// [default: OUT/estimators, carried over when OUT is overwritten].
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
+
+    /// Replace an earlier study in OUT, whole (its cached estimators are kept and reused).
+    #[arg(long)]
+    pub overwrite: bool,
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
@@ -88,7 +92,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         "{elapsed_precise} [{bar:30}] {pos}/{len} models {msg}",
     );
     let mut current = String::new();
-    let result = TradeStudy::new(settings).run(&args.out, &stop, &mut |event| {
+    let result = TradeStudy::new(settings).run(&args.out, args.overwrite, &stop, &mut |event| {
         match event {
             TradeEvent::Model {
                 index,
@@ -118,7 +122,11 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
     let report = match result {
         Ok(report) => report,
         Err(e) if stop.load(std::sync::atomic::Ordering::SeqCst) => {
-            writeln!(out, "{e:#}")?;
+            eprintln!(
+                "interrupted ({e:#}): {} is as it was; the estimators trained so far are kept \
+                 and the same command continues them",
+                args.out.display()
+            );
             return Err(interruption().into());
         }
         Err(e) => return Err(e),

@@ -169,7 +169,7 @@ fn sniff(bytes: &[u8]) -> Result<ImageFormat, Rejection> {
     match image::guess_format(bytes) {
         Ok(f @ (ImageFormat::Jpeg | ImageFormat::Png)) => Ok(f),
         Ok(other) => reject(format!(
-            "unsupported image format {}: photomat prepare reads JPEG and PNG",
+            "unsupported image format {}: photos are read as JPEG or PNG",
             other
                 .extensions_str()
                 .first()

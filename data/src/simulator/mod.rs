@@ -18,11 +18,11 @@ pub mod pose;
 pub mod random;
 pub mod scene;
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use candle_core::Device;
-use photomat_core::folder_lock::clear_previous_outputs;
 use photomat_core::map_files::{SaveOptions, save_maps};
+use photomat_core::output_folder::{OutputFolder, ResultKind};
 use photomat_core::{Error, Highlight, Result};
 use rand::Rng;
 use rayon::prelude::*;
@@ -74,8 +74,9 @@ pub const MIN_SIZE: usize = 4;
 
 /// Run a simulation into `out` (created): `photos/`, `truth/` and `simulation.json`, as
 /// docs/datasets.md describes. `progress` is called once per finished photo (from worker
-/// threads). Refuses an `out` that already holds `photos/` or `truth/` unless `overwrite`, in
-/// which case those two folders and `simulation.json` are removed first (nothing else is).
+/// threads). The folder is written whole when the run ends ([`SIMULATION`],
+/// [`photomat_core::output_folder`]): an earlier simulation is refused unless `overwrite`,
+/// which replaces it whole, and a folder holding files a simulation does not write is refused.
 pub fn simulate(
     out: &Path,
     config: &SimulationConfig<'_>,
@@ -97,11 +98,19 @@ pub fn simulate(
         camera.validate()?;
     }
     config.pose.validate()?;
-    prepare_output(out, overwrite)?;
+    // Written whole when the run ends: an earlier simulation is refused unless overwritten,
+    // and a killed run leaves the folder as it was.
+    let folder = OutputFolder::claim(out, SIMULATION, overwrite)?;
+    let staging = folder.path();
+    for dir in [PHOTOS_DIR, TRUTH_DIR] {
+        let dir = staging.join(dir);
+        std::fs::create_dir_all(&dir)
+            .map_err(|e| Error::file(&dir, format!("cannot create: {e}")))?;
+    }
     let photos = (0..config.count)
         .into_par_iter()
         .map(|index| {
-            let record = simulate_photo(out, config, index);
+            let record = simulate_photo(staging, config, index);
             progress();
             record
         })
@@ -113,37 +122,18 @@ pub fn simulate(
         size: config.size,
         photos,
     };
-    manifest.write(out)?;
+    manifest.write(staging)?;
+    folder.commit()?;
     Ok(manifest)
 }
 
-/// Create `out/photos` and `out/truth`, clearing a previous run when allowed.
-fn prepare_output(out: &Path, overwrite: bool) -> Result<()> {
-    let photos = out.join(PHOTOS_DIR);
-    let truth = out.join(TRUTH_DIR);
-    let manifest = out.join(SIMULATION_FILE);
-    let previous: Vec<PathBuf> = [&photos, &truth, &manifest]
-        .into_iter()
-        .filter(|p| p.exists())
-        .cloned()
-        .collect();
-    clear_previous_outputs(out, &previous, overwrite, || {
-        format!(
-            "already holds a simulation ({}); choose another folder or allow overwriting \
-             (photomat simulate --overwrite)",
-            previous
-                .iter()
-                .map(|p| p.file_name().unwrap_or_default().to_string_lossy())
-                .collect::<Vec<_>>()
-                .join(", ")
-        )
-    })?;
-    for dir in [&photos, &truth] {
-        std::fs::create_dir_all(dir)
-            .map_err(|e| Error::file(dir, format!("cannot create: {e}")))?;
-    }
-    Ok(())
-}
+/// What a simulation's folder holds.
+pub const SIMULATION: ResultKind = ResultKind {
+    what: "a simulation",
+    command: "photomat simulate",
+    entries: &[PHOTOS_DIR, TRUTH_DIR, SIMULATION_FILE],
+    kept: &[],
+};
 
 /// Simulate and write photo `index`; its record for `simulation.json`.
 fn simulate_photo(
@@ -202,6 +192,7 @@ fn simulate_photo(
         truth: truth_rel,
         family: family_name.into(),
         family_seed,
+        material: family.describe(family_seed),
         highlight_px: [row, col],
         highlight: [highlight.x, highlight.y],
         camera,

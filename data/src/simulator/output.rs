@@ -129,6 +129,10 @@ pub struct SimulatedPhoto {
     pub family: String,
     /// The family's seed: `family.generate(size, family_seed)` regenerates the material.
     pub family_seed: u64,
+    /// What the family says the material is, when it says more than its seed (a library
+    /// family: the material ids and how they were seen).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<String>,
     /// True highlight, continuous (row, col) pixel coordinates in the S×S photo.
     pub highlight_px: [f64; 2],
     /// True highlight (x, y) in photo-plane coordinates (the photo spans side 2).
@@ -240,6 +244,7 @@ mod tests {
                 truth: "truth/000000".into(),
                 family: "tiles".into(),
                 family_seed: 123,
+                material: None,
                 highlight_px: [30.5, 33.25],
                 highlight: [0.0390625, 0.046875],
                 camera: CameraModel::ideal(),

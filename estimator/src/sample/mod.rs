@@ -45,29 +45,32 @@
 //! # Ok::<(), anyhow::Error>(())
 //! ```
 
-pub mod choice;
 pub mod hextile;
+mod material;
+mod renders;
 pub mod summary;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use candle_core::{DType, Device, Tensor};
-use photomat_core::folder_lock::clear_previous_outputs;
-use photomat_core::image_io::{PlanarImage, PngBits, write_atomic, write_png};
-use photomat_core::map_files::{SaveOptions, folder_bytes, save_maps};
-use photomat_core::previews::map_previews;
-use photomat_core::sheet::{centre_crop, grid, resize_square};
-use photomat_core::simplify::{SimplifyRecord, simplify};
-use photomat_core::{Brdf, FlashGeometry, FolderLock, LightSet, MaterialMaps, render_with};
+use candle_core::{DType, Device};
+use photomat_core::LightSet;
+use photomat_core::image_io::{PngBits, write_atomic, write_png};
+use photomat_core::output_folder::{OutputFolder, ResultKind};
+use photomat_core::sheet::grid;
 use photomat_generator::GanModel;
 use photomat_generator::model_files::GAN_MANIFEST_FILE;
 
 use crate::EstimatorModel;
+pub use crate::model_choice::{
+    BrdfChoice, Candidate, DEFAULT_TOLERANCE, ESTIMATORS_DIR, Selection,
+};
 use crate::model_files::ESTIMATOR_MANIFEST_FILE;
-pub use choice::{BrdfChoice, Candidate, DEFAULT_TOLERANCE, ESTIMATORS_DIR, Selection};
 pub use summary::{MaterialSummary, SampleSummary, SimplifyTotals, Timings};
+
+use material::{Job, aligned_rows};
+pub(crate) use renders::{analytic_renders, finite_mean, neural_renders, per_light_l1};
 
 /// Materials shown in the contact sheet (the first ones of the run): 64 rows of 128-pixel
 /// tiles are already an 8,400-pixel-tall image; the per-material PNGs hold every material.
@@ -163,7 +166,7 @@ pub struct Sampler {
     dir: PathBuf,
     gan: GanModel,
     /// The root estimator first, then those of `estimators/*/`, cheapest first
-    /// ([`choice::load_estimators`]).
+    /// ([`crate::model_choice::load_estimators`]).
     estimators: Vec<EstimatorModel>,
     /// Seconds spent loading.
     load_seconds: f64,
@@ -185,7 +188,8 @@ impl Sampler {
         let start = Instant::now();
         let gan = GanModel::load(dir, device)
             .with_context(|| format!("cannot load the GAN model in '{}'", dir.display()))?;
-        let estimators = choice::load_estimators(dir, gan.config().feature_channels, device)?;
+        let estimators =
+            crate::model_choice::load_estimators(dir, gan.config().feature_channels, device)?;
         Ok(Self {
             dir: dir.to_path_buf(),
             gan,
@@ -236,7 +240,7 @@ impl Sampler {
             }
             BrdfChoice::Auto { .. } => {
                 let mut all: Vec<&EstimatorModel> = self.estimators.iter().collect();
-                all.sort_by_cached_key(|e| choice::cost_key(e));
+                all.sort_by_cached_key(|e| crate::model_choice::cost_key(e));
                 Ok(all)
             }
         }
@@ -278,10 +282,12 @@ impl Sampler {
         Ok(side)
     }
 
-    /// Samples `options.count` materials into `out` (created, and locked while it is
-    /// written: a second process on it fails naming this one), reporting to `progress`, and
-    /// writes `out/contact_sheet.png` and `out/summary.json`. A folder that already holds
-    /// samples is refused unless `options.overwrite`, which removes them first.
+    /// Samples `options.count` materials into `out`, reporting to `progress`, with
+    /// `out/contact_sheet.png` and `out/summary.json`. The folder is written whole when the
+    /// run ends ([`photomat_core::output_folder`]: locked, a second process on it fails naming
+    /// this one; an error or a kill leaves it as it was). A folder that already holds samples
+    /// is refused unless `options.overwrite`, which replaces them whole; one holding files a
+    /// sample run does not write is refused. The material side's memory is checked first.
     pub fn run(
         &self,
         options: &SampleOptions,
@@ -314,8 +320,11 @@ impl Sampler {
         let lights = self.lights();
         let world_side = config.world_side(resolution)?;
         let geometry = lights.geometry_on(resolution, world_side, DType::F32, self.gan.device())?;
-        let _lock = FolderLock::acquire(out, "photomat sample")?;
-        clear_previous_samples(out, options.overwrite)?;
+        check_memory(resolution, config.channel_multiplier)?;
+        // Written whole or not at all: an earlier run's samples are refused unless
+        // overwritten, and a killed run leaves them as they were.
+        let result = OutputFolder::claim(out, SAMPLES, options.overwrite)?;
+        let (output, out) = (out, result.path());
         if options.hextile && !config.tileable {
             progress(SampleEvent::Note(
                 "note: the model is not tileable; the maps' own border seam can show inside \
@@ -358,7 +367,10 @@ impl Sampler {
                 Ok(())
             })?;
             rows.extend(material.sheet_row);
-            materials.push(material.summary);
+            // The summary names where the material will be, not where it is written first.
+            let mut summary = material.summary;
+            summary.folder = output.join(format!("seed-{seed:04}")).display().to_string();
+            materials.push(summary);
             progress(SampleEvent::Material {
                 done: k + 1,
                 total: options.count,
@@ -389,491 +401,46 @@ impl Sampler {
         let mut text = serde_json::to_string_pretty(&summary)?;
         text.push('\n');
         write_atomic(&out.join(SUMMARY_FILE), text.as_bytes())?;
+        result.commit()?;
         Ok(summary)
     }
 }
 
-/// One run's fixed inputs.
-struct Job<'a> {
-    sampler: &'a Sampler,
-    options: &'a SampleOptions,
-    /// The estimators to draw on: one, or with `tolerance` (auto) every one, cheapest first.
-    candidates: &'a [&'a EstimatorModel],
-    tolerance: Option<f64>,
-    geometry: &'a FlashGeometry,
-    /// `geometry`'s texels within a photo's reach of their flash (L, 1, R, R)
-    /// ([`FlashGeometry::within_photo_reach`]).
-    in_photo_reach: Tensor,
-    /// Side of each material in texels.
-    size: usize,
-    /// Side of each render and preview in the sheets.
-    tile: usize,
+/// What a sample run's output folder holds.
+pub const SAMPLES: ResultKind = ResultKind {
+    what: "samples",
+    command: "photomat sample",
+    entries: &["seed-*", CONTACT_SHEET_FILE, SUMMARY_FILE],
+    kept: &[],
+};
+
+/// Peak memory of sampling one material of `side`² texels: about 1.3 kB per texel on top of
+/// 256 MB for the bundled model (channel multiplier ⅛; measured 2026-12-08: 0.43 GB at 512²,
+/// 1.18 GB at 1024², 5.46 GB at 2048²), the per-texel part growing with the generator's
+/// channel multiplier.
+pub fn sample_memory_bytes(side: usize, channel_multiplier: f64) -> u64 {
+    let per_texel = 1300.0 * (channel_multiplier / 0.125).max(1.0);
+    (256u64 << 20) + (per_texel * (side * side) as f64) as u64
 }
 
-/// One sampled material: its summary and, when asked for, its contact-sheet row.
-struct Material {
-    summary: MaterialSummary,
-    sheet_row: Option<SheetRow>,
-}
-
-impl Job<'_> {
-    /// Samples, renders and writes the material of `seed` into `folder`, with its contact-sheet
-    /// row when `want_row`; `exported` sees the texture set of its export, if any.
-    fn material(
-        &self,
-        seed: u64,
-        folder: &Path,
-        want_row: bool,
-        timings: &mut Timings,
-        exported: &mut dyn FnMut(&photomat_export::TextureSet) -> anyhow::Result<()>,
-    ) -> anyhow::Result<Material> {
-        let (gan, options) = (&self.sampler.gan, self.options);
-        let stage = Instant::now();
-        let features = gan.features_for_seeds_at(&[seed], options.psi, self.size)?;
-        timings.generate += stage.elapsed().as_secs_f64();
-        let stage = Instant::now();
-        let neural = neural_renders(gan, &features, self.geometry)?;
-        timings.relight += stage.elapsed().as_secs_f64();
-        // Every candidate decodes and renders the material; one is kept.
-        let mut scored = Vec::new();
-        for estimator in self.candidates {
-            let stage = Instant::now();
-            let maps = estimator
-                .estimate(&features)?
-                .with_texel_size(gan.config().map_texel_size());
-            timings.estimate += stage.elapsed().as_secs_f64();
-            let stage = Instant::now();
-            let analytic = analytic_renders(estimator.brdf(), &maps, self.geometry)?;
-            timings.render += stage.elapsed().as_secs_f64();
-            let l1 = per_light_l1(&analytic, &neural)?;
-            let l1_linear = match self.tolerance {
-                // Auto compares linear radiance (`choice` module docs).
-                Some(_) => mean(&per_light_l1(
-                    &analytic.powf(photomat_core::render::DISPLAY_GAMMA)?,
-                    &neural.powf(photomat_core::render::DISPLAY_GAMMA)?,
-                )?),
-                None => f64::NAN,
-            };
-            scored.push((estimator, maps, analytic, l1, l1_linear));
+/// Refuses a material side whose estimated peak exceeds the memory available, naming the
+/// largest side that fits.
+fn check_memory(side: usize, channel_multiplier: f64) -> anyhow::Result<()> {
+    let estimate = |s: usize| sample_memory_bytes(s, channel_multiplier);
+    photomat_core::memory::check(estimate(side), &format!("--size {side}"), |available| {
+        let sides = (1..=128).map(|k| 32 * k);
+        match photomat_core::memory::largest_fitting(sides, estimate, available) {
+            Some((s, bytes)) => format!(
+                "use --size {s} (about {}) or less",
+                photomat_core::memory::format_bytes(bytes)
+            ),
+            None => "free some memory".to_string(),
         }
-        let (chosen, selection) = match self.tolerance {
-            None => (0, None),
-            Some(tolerance) => {
-                let candidates: Vec<Candidate> = scored
-                    .iter()
-                    .map(|(e, _, _, l1, l1_linear)| Candidate {
-                        brdf: e.brdf().name(),
-                        channels: e.brdf().channels(),
-                        l1: mean(l1),
-                        l1_linear: *l1_linear,
-                    })
-                    .collect();
-                let k = choice::choose(&candidates, tolerance).with_context(|| {
-                    format!("seed {seed}: no model renders the material with a finite error")
-                })?;
-                let selection = Selection {
-                    chosen: candidates[k].brdf.clone(),
-                    tolerance,
-                    candidates,
-                };
-                (k, Some(selection))
-            }
-        };
-        let (estimator, maps, analytic, l1, _) = scored.swap_remove(chosen);
-        let brdf = estimator.brdf();
-        let inner = brdf.innermost();
-        let mut save_options = SaveOptions {
-            selection: selection.as_ref().map(serde_json::to_value).transpose()?,
-            ..SaveOptions::default()
-        };
-        let (maps, analytic, l1, simplification) = match options.simplify {
-            None => (maps, analytic, l1, None),
-            Some(tolerance) => {
-                let stage = Instant::now();
-                let simplified = self
-                    .simplified(
-                        brdf,
-                        maps,
-                        analytic,
-                        l1,
-                        &neural,
-                        tolerance,
-                        &mut save_options,
-                    )
-                    .with_context(|| format!("seed {seed}: cannot simplify the maps"))?;
-                timings.simplify += stage.elapsed().as_secs_f64();
-                simplified
-            }
-        };
-
-        let stage = Instant::now();
-        let tile = self.tile;
-        let analytic_tiles = images(&analytic, tile)?;
-        let neural_tiles = images(&neural, tile)?;
-        let extras = (options.tileable || options.hextile)
-            .then(|| brdf.shading_maps(&maps))
-            .transpose()?;
-        let mut tiled = None;
-        let mut hex = None;
-        if let Some(shading) = &extras {
-            if options.tileable {
-                let repeated = shading.map_tensors(|t| Ok(t.repeat((1, 1, 2, 2))?))?;
-                tiled = Some(centre_render(&inner, &repeated, 2 * tile)?);
-            }
-            if options.hextile {
-                let maps2 = hextile::hextile_maps(&inner, shading, seed)?;
-                hex = Some((centre_render(&inner, &maps2, 2 * tile)?, maps2));
-            }
-        }
-        timings.extras += stage.elapsed().as_secs_f64();
-
-        let stage = Instant::now();
-        save_maps(
-            &folder.join("material"),
-            brdf.as_ref(),
-            &maps,
-            &save_options,
-        )
-        .with_context(|| format!("cannot write the maps of seed {seed}"))?;
-        let strip = |tiles: &[PlanarImage]| grid(&[tiles.to_vec()], 0.0);
-        write_png(
-            &folder.join("neural.png"),
-            &strip(&neural_tiles)?,
-            PngBits::Eight,
-        )?;
-        write_png(
-            &folder.join("analytic.png"),
-            &strip(&analytic_tiles)?,
-            PngBits::Eight,
-        )?;
-        if let Some(image) = &tiled {
-            write_png(&folder.join("tiled_2x2.png"), image, PngBits::Eight)?;
-        }
-        if let Some((image, maps2)) = &hex {
-            write_png(&folder.join("hextile_2x2.png"), image, PngBits::Eight)?;
-            save_maps(
-                &folder.join("material_hextile_2x2"),
-                inner.as_ref(),
-                maps2,
-                &SaveOptions::default(),
-            )?;
-        }
-        if options.gltf || options.mtlx {
-            let export = folder.join("export");
-            let set = photomat_export::write_textures(&export, brdf.as_ref(), &maps)?;
-            if options.gltf {
-                photomat_export::write_gltf(&export, "material", &set)?;
-            }
-            if options.mtlx {
-                photomat_export::write_materialx(&export, "material", &set)?;
-            }
-            exported(&set)?;
-        }
-        timings.write += stage.elapsed().as_secs_f64();
-
-        let sheet_row = if want_row {
-            let sheet_tile = tile.min(SHEET_MAX_TILE);
-            let previews_full = map_previews(brdf.as_ref(), &maps)?;
-            // A material larger than its tile starts its row with its first map's centre at
-            // one texel per pixel, where the thumbnails average a fine lattice or grain away
-            // (first, so that rows of models with fewer maps keep it in the same column).
-            let mut row: Vec<PlanarImage> = previews_full
-                .first()
-                .filter(|(_, first)| first.width > sheet_tile)
-                .map(|(_, first)| centre_crop(first, sheet_tile))
-                .into_iter()
-                .collect();
-            row.extend(
-                previews_full
-                    .iter()
-                    .map(|(_, p)| resize_square(p, sheet_tile)),
-            );
-            let previews = row.len();
-            row.extend(analytic_tiles.iter().map(|t| resize_square(t, sheet_tile)));
-            row.extend(neural_tiles.iter().map(|t| resize_square(t, sheet_tile)));
-            Some(SheetRow {
-                tiles: row,
-                previews,
-            })
-        } else {
-            None
-        };
-        let l1_in_reach = per_light_l1_within(&analytic, &neural, &self.in_photo_reach)?;
-        Ok(Material {
-            summary: MaterialSummary {
-                seed,
-                folder: folder.display().to_string(),
-                brdf: brdf.name(),
-                selection,
-                simplification,
-                l1_mean: mean(&l1),
-                l1_per_light: l1,
-                l1_within_photo_reach: finite_mean(&l1_in_reach),
-                l1_within_photo_reach_per_light: l1_in_reach,
-            },
-            sheet_row,
-        })
-    }
-}
-
-impl Job<'_> {
-    /// `--simplify`: the maps simplified within `tolerance` of both [`SIMPLIFY_METRICS`]
-    /// against M's renders `neural`, their renders and per-light L1 (the ones given when no
-    /// map could be simplified), and the record, which `save_options` then carries with
-    /// `compact` set.
-    #[allow(clippy::too_many_arguments)]
-    fn simplified(
-        &self,
-        brdf: &Brdf,
-        maps: MaterialMaps,
-        analytic: Tensor,
-        l1: Vec<f64>,
-        neural: &Tensor,
-        tolerance: f64,
-        save_options: &mut SaveOptions,
-    ) -> anyhow::Result<(MaterialMaps, Tensor, Vec<f64>, Option<SimplifyRecord>)> {
-        let gamma = photomat_core::render::DISPLAY_GAMMA;
-        let linear_neural = neural.powf(gamma)?;
-        let simplified = simplify(brdf.as_ref(), &maps, tolerance, |m| {
-            let analytic = analytic_renders(brdf, m, self.geometry)?;
-            let linear = analytic.powf(gamma)?;
-            Ok::<_, anyhow::Error>(vec![
-                mean(&per_light_l1(&linear, &linear_neural)?),
-                mean(&per_light_l1(&analytic, neural)?),
-            ])
-        })?;
-        let bytes_before = folder_bytes(brdf.as_ref(), &maps, save_options)?;
-        save_options.compact = true;
-        let bytes_after = folder_bytes(brdf.as_ref(), &simplified.maps, save_options)?;
-        let record = simplified.record(&SIMPLIFY_METRICS, bytes_before, bytes_after);
-        save_options.simplification = Some(serde_json::to_value(&record)?);
-        if simplified.steps.is_empty() {
-            return Ok((maps, analytic, l1, Some(record)));
-        }
-        let analytic = analytic_renders(brdf, &simplified.maps, self.geometry)?;
-        let l1 = per_light_l1(&analytic, neural)?;
-        Ok((simplified.maps, analytic, l1, Some(record)))
-    }
-}
-
-/// Lights per call of M or the renderer at a side of `side` texels: all of them up to
-/// [`LIGHT_BATCH_TEXELS`] texels, fewer above (M's and the renderer's intermediates scale with
-/// the batch: 5 lights of a 1024² material would hold gigabytes at once).
-fn lights_per_call(geometry: &FlashGeometry, side: usize) -> anyhow::Result<usize> {
-    let lights = geometry.omega.dim(0)?;
-    Ok((LIGHT_BATCH_TEXELS / (side * side)).clamp(1, lights))
-}
-
-/// M's relighting of `features` under every light of `geometry`, display-encoded in [0, 1]
-/// ([`photomat_generator::relight::to_display`]), in groups of lights that bound the memory.
-///
-/// # Shapes
-/// features (1, F, R, R) → (lights, 3, R, R).
-pub(crate) fn neural_renders(
-    gan: &GanModel,
-    features: &Tensor,
-    geometry: &FlashGeometry,
-) -> anyhow::Result<Tensor> {
-    let lights = geometry.omega.dim(0)?;
-    let per_call = lights_per_call(geometry, features.dim(3)?)?;
-    let mut neural = Vec::new();
-    for first in (0..lights).step_by(per_call) {
-        let n = per_call.min(lights - first);
-        let group = geometry.narrow(first, n)?;
-        let repeated = features.repeat((n, 1, 1, 1))?;
-        neural.push(gan.relight().forward(&repeated, &group.omega)?);
-    }
-    Ok(photomat_generator::relight::to_display(&Tensor::cat(
-        &neural, 0,
-    )?)?)
-}
-
-/// The analytic render of `maps` in `brdf` under every light of `geometry`, display-encoded in
-/// [0, 1], in the same groups of lights as [`neural_renders`].
-///
-/// # Shapes
-/// maps (1, C, R, R) → (lights, 3, R, R).
-pub(crate) fn analytic_renders(
-    brdf: &Brdf,
-    maps: &MaterialMaps,
-    geometry: &FlashGeometry,
-) -> anyhow::Result<Tensor> {
-    let lights = geometry.omega.dim(0)?;
-    let (_, side, _) = maps.batch_and_size()?;
-    let per_call = lights_per_call(geometry, side)?;
-    let mut analytic = Vec::new();
-    for first in (0..lights).step_by(per_call) {
-        let group = geometry.narrow(first, per_call.min(lights - first))?;
-        analytic.push(render_with(brdf.as_ref(), maps, &group)?);
-    }
-    Ok(Tensor::cat(&analytic, 0)?)
-}
-
-/// One material's contact-sheet row: its map previews (after the detail tile of a large
-/// material), then its renders.
-struct SheetRow {
-    tiles: Vec<PlanarImage>,
-    /// How many of `tiles` come before the renders (the detail tile and the map previews).
-    previews: usize,
-}
-
-/// The rows as one grid's rows, black tiles inserted after the previews of a model with fewer
-/// maps (auto mixes models) so that every row's renders share columns.
-fn aligned_rows(rows: Vec<SheetRow>) -> Vec<Vec<PlanarImage>> {
-    let most = rows.iter().map(|r| r.previews).max().unwrap_or(0);
-    rows.into_iter()
-        .map(|mut row| {
-            if let Some(first) = row.tiles.first() {
-                let blank = PlanarImage::filled(first.channels, first.height, first.width, 0.0);
-                let at = row.previews;
-                row.tiles
-                    .splice(at..at, std::iter::repeat_n(blank, most - row.previews));
-            }
-            row.tiles
-        })
-        .collect()
-}
-
-/// Mean absolute difference per light of two (lights, 3, R, R) batches.
-pub(crate) fn per_light_l1(a: &Tensor, b: &Tensor) -> anyhow::Result<Vec<f64>> {
-    Ok((a - b)?
-        .abs()?
-        .flatten_from(1)?
-        .mean(1)?
-        .to_dtype(DType::F64)?
-        .to_vec1()?)
-}
-
-/// Per light, the mean |a − b| over the texels where `mask` is 1: (L, C, R, R) renders and an
-/// (L, 1, R, R) 0/1 mask give L values, NaN for a light whose mask is empty.
-pub(crate) fn per_light_l1_within(
-    a: &Tensor,
-    b: &Tensor,
-    mask: &Tensor,
-) -> anyhow::Result<Vec<f64>> {
-    let channels = a.dim(1)? as f64;
-    let mask = mask.to_dtype(a.dtype())?;
-    let sums: Vec<f64> = (a - b)?
-        .abs()?
-        .broadcast_mul(&mask)?
-        .flatten_from(1)?
-        .sum(1)?
-        .to_dtype(DType::F64)?
-        .to_vec1()?;
-    let counts: Vec<f64> = mask
-        .flatten_from(1)?
-        .sum(1)?
-        .to_dtype(DType::F64)?
-        .to_vec1()?;
-    Ok(sums
-        .iter()
-        .zip(&counts)
-        .map(|(s, n)| {
-            if *n > 0.0 {
-                s / (n * channels)
-            } else {
-                f64::NAN
-            }
-        })
-        .collect())
-}
-
-/// The mean of a non-empty list.
-fn mean(values: &[f64]) -> f64 {
-    values.iter().sum::<f64>() / values.len() as f64
-}
-
-/// The mean of the finite values of a list; NaN when there is none.
-pub(crate) fn finite_mean(values: &[f64]) -> f64 {
-    let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
-    if finite.is_empty() {
-        f64::NAN
-    } else {
-        mean(&finite)
-    }
+    })?;
+    Ok(())
 }
 
 /// Greatest common divisor (Euclid).
 fn gcd(a: usize, b: usize) -> usize {
     if b == 0 { a } else { gcd(b, a % b) }
-}
-
-/// The display-encoded render of `maps` under the centred flash, resized to `side`.
-fn centre_render(brdf: &Brdf, maps: &MaterialMaps, side: usize) -> anyhow::Result<PlanarImage> {
-    let image = photomat_core::render(brdf.as_ref(), maps, &[photomat_core::Highlight::CENTER])?;
-    Ok(resize_square(&PlanarImage::from_tensor(&image)?, side))
-}
-
-/// The items of a (B, 3, R, R) batch as images resized to `side`.
-fn images(batch: &Tensor, side: usize) -> anyhow::Result<Vec<PlanarImage>> {
-    (0..batch.dim(0)?)
-        .map(|i| {
-            Ok(resize_square(
-                &PlanarImage::from_tensor(&batch.narrow(0, i, 1)?)?,
-                side,
-            ))
-        })
-        .collect()
-}
-
-/// What a sample run writes directly under its output folder, besides `seed-*` folders.
-const SAMPLE_FILES: [&str; 2] = [CONTACT_SHEET_FILE, SUMMARY_FILE];
-
-/// Whether `name` is a material folder of a sample run: `seed-` and the seed's digits.
-fn is_seed_folder(name: &str) -> bool {
-    name.strip_prefix("seed-")
-        .is_some_and(|digits| !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit()))
-}
-
-/// Refuses an `out` that holds a previous run's samples, or with `overwrite` removes them
-/// (the `seed-*` folders, the contact sheet and the summary; nothing else in `out`).
-fn clear_previous_samples(out: &Path, overwrite: bool) -> anyhow::Result<()> {
-    let entries =
-        std::fs::read_dir(out).with_context(|| format!("cannot list '{}'", out.display()))?;
-    let mut previous = Vec::new();
-    let mut folders = 0;
-    for entry in entries.flatten() {
-        let name = entry.file_name().to_string_lossy().into_owned();
-        let is_dir = entry.file_type().is_ok_and(|t| t.is_dir());
-        if (is_dir && is_seed_folder(&name)) || (!is_dir && SAMPLE_FILES.contains(&name.as_str())) {
-            folders += usize::from(is_dir);
-            previous.push(entry.path());
-        }
-    }
-    let summary = previous.iter().any(|p| p.ends_with(SUMMARY_FILE));
-    clear_previous_outputs(out, &previous, overwrite, || {
-        format!(
-            "already holds samples ({folders} seed folder(s){}); add --overwrite to replace \
-             them, or choose another --out",
-            if summary { ", summary.json" } else { "" }
-        )
-    })?;
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    /// The masked L1 averages over the masked texels only, and is NaN where none is.
-    #[test]
-    fn l1_within_a_mask_averages_only_the_masked_texels() -> anyhow::Result<()> {
-        let device = candle_core::Device::Cpu;
-        // Two lights, 3 channels, 2×2 texels: |a − b| is 0.1 on the left column, 0.5 on the right.
-        let diff =
-            Tensor::new(&[[0.1f32, 0.5], [0.1, 0.5]], &device)?.broadcast_as((2, 3, 2, 2))?;
-        let b = Tensor::zeros((2, 3, 2, 2), DType::F32, &device)?;
-        let a = (&b + diff)?;
-        let left = Tensor::new(&[[1f32, 0.0], [1.0, 0.0]], &device)?.reshape((1, 1, 2, 2))?;
-        let mask = Tensor::cat(
-            &[left, Tensor::zeros((1, 1, 2, 2), DType::F32, &device)?],
-            0,
-        )?;
-        let l1 = per_light_l1_within(&a, &b, &mask)?;
-        assert!((l1[0] - 0.1).abs() < 1e-7, "{l1:?}");
-        assert!(l1[1].is_nan());
-        assert!((finite_mean(&l1) - 0.1).abs() < 1e-7);
-        assert!((mean(&per_light_l1(&a, &b)?) - 0.3).abs() < 1e-7);
-        Ok(())
-    }
 }

@@ -22,7 +22,7 @@
 //!
 //! let settings = TradeSettings::new("models/demo".into(), vec!["lambert".into(), "ggx".into()], "T/estimators".into());
 //! let stop = std::sync::atomic::AtomicBool::new(false);
-//! let report = TradeStudy::new(settings).run("T".as_ref(), &stop, &mut |_event| Ok(()))?;
+//! let report = TradeStudy::new(settings).run("T".as_ref(), false, &stop, &mut |_event| Ok(()))?;
 //! for entry in &report.entries {
 //!     println!("{}: L1 {:.4}, {:.1} ms/Mtexel", entry.spec, entry.accuracy.l1_mean, entry.cost.render.eval_ms_per_megatexel);
 //! }
@@ -40,7 +40,8 @@ use std::sync::atomic::AtomicBool;
 use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor};
 use photomat_core::image_io::write_atomic;
-use photomat_core::{FlashGeometry, FolderLock, LightSet, SplitMix64, lookup};
+use photomat_core::output_folder::{OutputFolder, ResultKind};
+use photomat_core::{FlashGeometry, LightSet, SplitMix64, lookup};
 use photomat_generator::GanModel;
 use photomat_generator::model_files::GAN_WEIGHTS_FILE;
 use serde::{Deserialize, Serialize};
@@ -71,6 +72,18 @@ pub const DEFAULT_SPATIAL_SIDE: usize = 128;
 const CACHE_KEY_FILE: &str = "trade-key.json";
 /// The report files.
 pub const TABLE_FILE: &str = "trade.md";
+/// The default cache of trained estimators inside a study's folder.
+pub const CACHE_DIR: &str = "estimators";
+
+/// What a trade study's folder holds: its table, record and plot, the first material's maps
+/// per model, and (by default) the cache of trained estimators, which a new study of the same
+/// folder takes over.
+pub const TRADE: ResultKind = ResultKind {
+    what: "a trade study",
+    command: "photomat trade",
+    entries: &[TABLE_FILE, JSON_FILE, PLOT_FILE, "maps", CACHE_DIR],
+    kept: &[CACHE_DIR],
+};
 pub const JSON_FILE: &str = "trade.json";
 pub const PLOT_FILE: &str = "trade.png";
 
@@ -155,12 +168,14 @@ impl TradeStudy {
     }
 
     /// Runs the study and writes `out/trade.md`, `out/trade.json`, `out/trade.png` and, per
-    /// model, `out/maps/<name>/` (the first material's maps). `out` is locked while written.
+    /// model, `out/maps/<name>/` (the first material's maps), the folder whole when the study
+    /// ends ([`TRADE`]: an earlier study is refused unless `overwrite`).
     /// Stops between training steps when `stop` is set (the estimator's checkpoint is kept, so
     /// the next run resumes it) and then returns an error saying so.
     pub fn run(
         &self,
         out: &Path,
+        overwrite: bool,
         stop: &AtomicBool,
         progress: &mut dyn FnMut(TradeEvent) -> anyhow::Result<()>,
     ) -> anyhow::Result<TradeReport> {
@@ -182,7 +197,20 @@ impl TradeStudy {
             }
             canonical.push(name);
         }
-        let _lock = FolderLock::acquire(out, "photomat trade")?;
+        // Written whole when the study ends; the default cache (`out/estimators`) is carried
+        // over from an earlier study or an interrupted one ([`TRADE`]).
+        let folder = OutputFolder::claim(out, TRADE, overwrite)?;
+        let cache = match s.cache.strip_prefix(out) {
+            Ok(rel) if rel == Path::new(CACHE_DIR) => folder.path().join(CACHE_DIR),
+            Ok(_) => bail!(
+                "the estimator cache {} lies inside the study's folder: use {} (the default) or \
+                 a folder outside it",
+                s.cache.display(),
+                out.join(CACHE_DIR).display()
+            ),
+            Err(_) => s.cache.clone(),
+        };
+        let out = folder.path();
         let device = Device::Cpu;
         let gan = GanModel::load(&s.gan, &device)
             .with_context(|| format!("cannot load the GAN model in '{}'", s.gan.display()))?;
@@ -190,7 +218,7 @@ impl TradeStudy {
 
         let mut trained = Vec::new();
         for (index, spec) in canonical.iter().enumerate() {
-            let dir = s.cache.join(folder_name(spec));
+            let dir = cache.join(folder_name(spec));
             let reused = self.prepare_cache(&dir, spec, progress)?;
             progress(TradeEvent::Model {
                 index,
@@ -219,6 +247,7 @@ impl TradeStudy {
         write_atomic(&out.join(JSON_FILE), json.as_bytes())?;
         write_atomic(&out.join(TABLE_FILE), report.markdown().as_bytes())?;
         plot::write_pareto_plot(&out.join(PLOT_FILE), &report)?;
+        folder.commit()?;
         Ok(report)
     }
 

@@ -1,4 +1,5 @@
-//! Which BRDF model each sampled material gets (`docs/trade.md`, "Choosing per material").
+//! Which BRDF model a sampled or captured material gets (`docs/trade.md`, "Choosing per
+//! material"; `photomat sample` and `photomat capture`).
 //!
 //! A model folder holds its default estimator E at the root (`estimator.json` +
 //! `estimator.safetensors`) and may hold more under `estimators/<name>/`, one per BRDF model,
@@ -44,7 +45,8 @@ pub enum BrdfChoice {
 }
 
 impl BrdfChoice {
-    /// `auto`, or a specification.
+    /// `auto`, or a specification of a registered model (checked here, before any model
+    /// folder loads; kept in its canonical form).
     pub fn parse(text: &str, tolerance: f64) -> anyhow::Result<Self> {
         if text.trim() == "auto" {
             if !(tolerance.is_finite() && tolerance >= 0.0) {
@@ -52,8 +54,14 @@ impl BrdfChoice {
             }
             Ok(Self::Auto { tolerance })
         } else {
-            Ok(Self::Named(text.to_string()))
+            let brdf = photomat_core::lookup(text).context("invalid --brdf")?;
+            Ok(Self::Named(brdf.name()))
         }
+    }
+
+    /// Whether this is [`BrdfChoice::Auto`].
+    pub fn is_auto(&self) -> bool {
+        matches!(self, BrdfChoice::Auto { .. })
     }
 }
 
