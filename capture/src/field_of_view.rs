@@ -2,7 +2,7 @@
 //! a phone's main camera (docs/conventions.md, "A photo's field of view").
 //!
 //! With the camera straight down and the flash beside the lens, the field of view sets how
-//! wide the photographed square is at the flash's height ([`crate::square_side`]), hence the
+//! wide the photographed square is at the flash's height ([`crate::square::square_side`]), hence the
 //! angles under which every texel saw the flash. A wrong one leaves a ghost of the photo's
 //! highlight in the maps: a simulated fabric photo (90°) captured at 67° relit with a bright
 //! crescent where the photo's highlight had been, faint at 90° (docs/benchmarks/capture.md, "The
@@ -16,7 +16,15 @@
 use photomat_data::dataset::lens::{LensRecord, read_lens};
 use serde::Serialize;
 
-use crate::{DEFAULT_FOV_DEGREES, FOV_RANGE};
+/// Default field of view across a photo's longer side, in degrees: a phone's main camera
+/// (26 mm equivalent focal length on a 4:3 sensor: 2·atan(17.3 / 26) ≈ 67°).
+pub const DEFAULT_FOV_DEGREES: f64 = 67.0;
+
+pub use photomat_core::flash::TRAINING_FOV_DEGREES;
+
+/// Fields of view a capture accepts, in degrees: below 5° the photo is a telescope's, above
+/// 150° a fisheye's, which a pinhole straight down does not describe.
+pub const FOV_RANGE: (f64, f64) = (5.0, 150.0);
 
 /// A field of view across the photo's longer side and where it came from.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

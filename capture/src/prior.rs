@@ -29,7 +29,7 @@ use anyhow::{Context, bail};
 use candle_core::{DType, Device, Tensor, Var};
 use photomat_core::Brdf;
 use photomat_estimator::EstimatorModel;
-use photomat_estimator::sample::choice::{cost_key, load_estimators};
+use photomat_estimator::model_choice::{cost_key, load_estimators};
 use photomat_generator::{GanModel, NoiseInput};
 use photomat_train::{Adam, AdamConfig};
 

@@ -10,8 +10,9 @@ use std::f64::consts::PI;
 use std::path::Path;
 
 use candle_core::{DType, Device, Tensor};
-use photomat_core::image_io::{CONTACT_SHEET_GAP, PlanarImage, PngBits, read_png};
+use photomat_core::image_io::{PlanarImage, PngBits, read_png};
 use photomat_core::map_files::{SaveOptions, save_maps};
+use photomat_core::sheet::CONTACT_SHEET_GAP;
 use photomat_core::{Highlight, MaterialMaps, registered_names, render};
 use photomat_tests::cli_fixtures::{photomat, photomat_error};
 use photomat_tests::{expected_builtins, model, random_maps, rng};

@@ -8,7 +8,8 @@ use std::path::Path;
 
 use image::AnimationDecoder;
 use image::codecs::gif::GifDecoder;
-use photomat_core::image_io::{CONTACT_SHEET_GAP, PlanarImage, contact_sheet_grid, read_png};
+use photomat_core::image_io::{PlanarImage, read_png};
+use photomat_core::sheet::{CONTACT_SHEET_GAP, contact_sheet_grid};
 use photomat_tests::cli_fixtures::{path_str, photomat, photomat_error, tiny_gan};
 
 const SIDE: usize = 32;

@@ -1,32 +1,42 @@
-//! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--size 256] [--steps 400] [--fov DEG]
-//! [--highlight ROW,COL] [--prior] [--model MODEL] [--prior-steps 100] [--anchor μ]
-//! [--tolerance T] [--warmup-steps 100] [--no-vignetting] [--ambient] [--uniform MAP,…]
-//! [--known DIR] [--relief] [--full-size-steps 100] [--gltf] [--mtlx]`:
-//! one phone flash photo → maps of a named BRDF model. The fit is the
-//! library's `photomat_capture::capture_with_prior` (docs/capture.md): from constant maps, or,
-//! with `--prior` or `--model`, from the model folder's generator prior when the folder has an
-//! estimator for SPEC; with `--brdf auto`, `photomat_capture::capture_auto` chooses the model
-//! among the folder's estimators. This command
-//! reads the file, locks DIR, shows progress and writes DIR/material/ (loadable by every
-//! command), DIR/export/ (renderer textures, and the glTF / MaterialX documents asked for),
-//! DIR/sheet.png (photo | [M's relighting | E's maps] | re-render | ×4 error),
-//! DIR/relit.png (the maps under eight new flash positions) and DIR/capture.json (geometry,
-//! highlight, gain, losses, timings).
+//! `photomat capture PHOTO --brdf SPEC|auto --out DIR [--overwrite] [--start constant|gan]
+//! [--size 256] [--steps 400] [--fov DEG] [--highlight ROW,COL] [--prior] [--model MODEL]
+//! [--prior-steps 100] [--anchor μ] [--tolerance T] [--warmup-steps 100] [--no-vignetting]
+//! [--ambient] [--uniform MAP,…] [--known DIR] [--relief] [--full-size-steps 100] [--gltf]
+//! [--mtlx]`: one phone flash photo → maps of a named BRDF model (docs/capture.md). The work is
+//! the library's `photomat_capture::CaptureJob`: from constant maps, or with `--start gan`
+//! (`--prior`, `--model`) from the model folder's generator prior when the folder has an
+//! estimator for SPEC; with `--brdf auto` the model is chosen among the folder's estimators.
+//! The job checks the model, the output folder and the memory before it starts and writes DIR
+//! whole when it ends (an earlier capture is refused unless `--overwrite`; an interrupted or
+//! killed capture leaves DIR as it was): DIR/material/ (loadable by every command),
+//! DIR/export/ (renderer textures, and the glTF / MaterialX documents asked for),
+//! DIR/sheet.png (photo | [M's relighting | E's maps] | re-render | ×4 error), DIR/relit.png
+//! (the maps under eight new flash positions) and DIR/capture.json (geometry, highlight, gain,
+//! losses, timings). This command builds the job, shows progress and prints its report.
 
 use std::io::Write;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{Context, bail};
-use candle_core::Device;
 use photomat_capture::{
-    CaptureOptions, Exports, FOV_RANGE, GanPrior, PriorOptions, capture_auto, capture_with_prior,
-    write_capture,
+    CaptureJob, CaptureOptions, Exports, FOV_RANGE, JobOutcome, PRIOR_REFINEMENT_STEPS,
+    PriorOptions, StartFrom,
 };
-use photomat_core::map_files::load_maps;
-use photomat_core::{Brdf, FolderLock, MaterialMaps, lookup};
-use photomat_estimator::sample::choice::DEFAULT_TOLERANCE;
+use photomat_estimator::model_choice::{BrdfChoice, DEFAULT_TOLERANCE};
 
-use crate::common::{model_dir, parse_pair, steps_bar};
+use crate::common::{interruption, model_dir, parse_pair, steps_bar, stop_flag};
+
+/// Where the fit starts, on the command line.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Start {
+    /// Constant maps with a uniform warm-up.
+    Constant,
+    /// The relief prior (--prior-model, else the model folder's priors/ for --brdf): its
+    /// prediction of the maps, relief included, refined and held near it.
+    Prior,
+    /// The generator prior of the model folder (--model, else the default one): its GAN
+    /// inverted to the photo, decoded by its estimator for --brdf.
+    Gan,
+}
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -48,15 +58,30 @@ pub struct Args {
     #[arg(long, value_name = "T", default_value_t = DEFAULT_TOLERANCE, value_parser = parse_weight)]
     pub tolerance: f64,
 
-    /// Output folder (created and locked while it is written).
+    /// Output folder: written whole when the capture ends (a killed or interrupted capture
+    /// leaves it as it was); an earlier capture in it is refused unless --overwrite.
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+
+    /// Replace an earlier capture in DIR, whole.
+    #[arg(long)]
+    pub overwrite: bool,
+
+    /// Where the fit starts [default: prior when the model folder has a relief prior for
+    /// --brdf, else constant; gan with --prior or --model].
+    #[arg(long, value_enum, value_name = "FROM")]
+    pub start: Option<Start>,
+
+    /// A relief prior's folder (a `photomat train-prior` run, or a model folder's
+    /// priors/NAME/); implies --start prior.
+    #[arg(long, value_name = "DIR")]
+    pub prior_model: Option<PathBuf>,
 
     /// Side of the maps: the photo is resampled to N² before fitting [default: 256].
     #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(16..=2048))]
     pub size: Option<u32>,
 
-    /// Optimisation steps [default: 400].
+    /// Optimisation steps [default: 400; 100 from the relief prior].
     #[arg(long, value_name = "K", value_parser = clap::value_parser!(u32).range(1..=100_000))]
     pub steps: Option<u32>,
 
@@ -79,7 +104,7 @@ pub struct Args {
     /// decoded by the estimator for --brdf. Off by default: on simulated photos of the eight
     /// families the bundled model's prior relit better on five and worse on three (fabric,
     /// paint, tiles), worse on average, at 3–4× the time (docs/benchmarks/capture.md, "`photomat
-    /// capture` with the generator prior").
+    /// capture` with the generator prior"). The same as --start gan.
     #[arg(long)]
     pub prior: bool,
 
@@ -154,42 +179,6 @@ pub struct Args {
     pub mtlx: bool,
 }
 
-/// The maps of the material folder `dir` that `brdf` takes (the others are named in a note
-/// on `out`); a folder that holds none of them is an error.
-fn known_maps(dir: &Path, brdf: &Brdf, out: &mut dyn Write) -> anyhow::Result<MaterialMaps> {
-    let loaded = load_maps(dir, None)
-        .with_context(|| format!("--known: cannot load '{}'", dir.display()))?;
-    let takes: Vec<&str> = brdf.params().iter().map(|p| p.name).collect();
-    let mut held = MaterialMaps::new();
-    let mut skipped = Vec::new();
-    for (name, map) in loaded.maps.iter() {
-        if takes.contains(&name) {
-            held.insert(name, map.clone());
-        } else {
-            skipped.push(name);
-        }
-    }
-    if held.names().is_empty() {
-        bail!(
-            "--known: '{}' has none of {}'s maps ({}); it has {}",
-            dir.display(),
-            brdf.name(),
-            takes.join(", "),
-            loaded.maps.names().join(", ")
-        );
-    }
-    if !skipped.is_empty() {
-        writeln!(
-            out,
-            "note: --known: {} of '{}' not held ({} does not take them)",
-            skipped.join(", "),
-            dir.display(),
-            brdf.name()
-        )?;
-    }
-    Ok(held)
-}
-
 /// A finite weight ≥ 0.
 fn parse_weight(text: &str) -> Result<f64, String> {
     match text.trim().parse::<f64>() {
@@ -215,24 +204,98 @@ fn parse_pixel(text: &str) -> Result<(f64, f64), String> {
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let auto = args.brdf.trim() == "auto";
-    let brdf = if auto {
-        None
-    } else {
-        Some(lookup(&args.brdf).context("invalid --brdf")?)
+    let job = job(args)?;
+    let stop = stop_flag()?;
+    let job = CaptureJob {
+        options: CaptureOptions {
+            stop: Some(stop.clone()),
+            ..job.options
+        },
+        ..job
     };
-    let bytes = std::fs::read(&args.photo)
-        .with_context(|| format!("cannot read '{}'", args.photo.display()))?;
-    let known_maps = match (&args.known, &brdf) {
-        (None, _) => None,
-        (Some(_), None) => bail!("--known needs a named --brdf: `auto` chooses the model later"),
-        (Some(dir), Some(brdf)) => Some(known_maps(dir, brdf, out)?),
+    let prior_steps = match job.start {
+        StartFrom::Gan => job.prior_options.steps,
+        _ if job.brdf.is_auto() => job.prior_options.steps,
+        StartFrom::Constant | StartFrom::Prior => 0,
+    };
+    let bar = steps_bar((prior_steps + job.options.steps) as u64, 0);
+    let outcome = job.run(&mut |step, loss| {
+        let phase = if step <= prior_steps {
+            "inversion"
+        } else {
+            "refinement"
+        };
+        bar.set_position(step as u64);
+        bar.set_message(format!("{phase} loss {loss:.4}"));
+    });
+    bar.finish_and_clear();
+    match outcome? {
+        JobOutcome::Done(report) => {
+            for note in &report.notes {
+                writeln!(out, "{note}")?;
+            }
+            writeln!(out, "{report}")?;
+            Ok(())
+        }
+        JobOutcome::Stopped => {
+            eprintln!(
+                "interrupted: nothing was written; {} is as it was. Run the same command again \
+                 to capture the photo",
+                args.out.display()
+            );
+            Err(interruption().into())
+        }
+    }
+}
+
+/// Where a capture starts without --start: from the relief prior when the default model folder
+/// has one for the named model, else from constant maps.
+fn default_start(brdf: &BrdfChoice) -> anyhow::Result<StartFrom> {
+    let BrdfChoice::Named(spec) = brdf else {
+        return Ok(StartFrom::Constant);
+    };
+    let model = photomat_core::lookup(spec)?;
+    let has_prior = model_dir(None)
+        .ok()
+        .map(|dir| photomat_prior::find_prior(&dir, &model))
+        .transpose()?
+        .flatten()
+        .is_some();
+    Ok(if has_prior {
+        StartFrom::Prior
+    } else {
+        StartFrom::Constant
+    })
+}
+
+/// The job the flags describe: the model checked by name, the model folder resolved when the
+/// fit starts from the generator prior (or chooses the model).
+fn job(args: &Args) -> anyhow::Result<CaptureJob> {
+    let brdf = BrdfChoice::parse(&args.brdf, args.tolerance)?;
+    let start = match args.start {
+        Some(Start::Gan) => StartFrom::Gan,
+        Some(Start::Prior) => StartFrom::Prior,
+        Some(Start::Constant) => StartFrom::Constant,
+        None if args.prior || args.model.is_some() => StartFrom::Gan,
+        None if args.prior_model.is_some() => StartFrom::Prior,
+        None => default_start(&brdf)?,
+    };
+    let model_dir = match start {
+        StartFrom::Gan | StartFrom::Prior => Some(model_dir(args.model.as_deref())?),
+        StartFrom::Constant if brdf.is_auto() => Some(model_dir(args.model.as_deref())?),
+        StartFrom::Constant => None,
     };
     let defaults = CaptureOptions::default();
     let options = CaptureOptions {
-        known_maps,
         size: args.size.map_or(defaults.size, |n| n as usize),
-        steps: args.steps.map_or(defaults.steps, |k| k as usize),
+        steps: args.steps.map_or(
+            if start == StartFrom::Prior {
+                PRIOR_REFINEMENT_STEPS
+            } else {
+                defaults.steps
+            },
+            |k| k as usize,
+        ),
         highlight: args.highlight,
         fov_degrees: args.fov,
         anchor: args.anchor.unwrap_or(defaults.anchor),
@@ -254,158 +317,20 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             .map_or(PriorOptions::default().steps, |k| k as usize),
         ..PriorOptions::default()
     };
-    let prior = match &brdf {
-        _ if !(auto || args.prior || args.model.is_some()) => None,
-        None => {
-            let dir = model_dir(args.model.as_deref())?;
-            Some(GanPrior::open_all(&dir, &Device::Cpu)?)
-        }
-        Some(brdf) => {
-            let dir = model_dir(args.model.as_deref())?;
-            let prior = GanPrior::open(&dir, brdf, &Device::Cpu)?;
-            if prior.is_none() {
-                writeln!(
-                    out,
-                    "note: '{}' has no estimator for {}: fitting from constant maps (train one \
-                     with `photomat train-estimator --gan {0} --brdf '{1}' --out {0}/estimators/NAME`)",
-                    dir.display(),
-                    brdf.name()
-                )?;
-            }
-            prior
-        }
-    };
-    let _lock = FolderLock::acquire(&args.out, "photomat capture")?;
-    let prior_steps = if prior.is_some() {
-        prior_options.steps
-    } else {
-        0
-    };
-    let bar = steps_bar((prior_steps + options.steps) as u64, 0);
-    let name = args.photo.display().to_string();
-    let prior_arg = prior.as_ref().map(|p| (p, &prior_options));
-    let mut show = |step: usize, loss: f64| {
-        let phase = if step <= prior_steps {
-            "inversion"
-        } else {
-            "refinement"
-        };
-        bar.set_position(step as u64);
-        bar.set_message(format!("{phase} loss {loss:.4}"));
-    };
-    let result = match (&brdf, prior_arg) {
-        (Some(brdf), prior_arg) => {
-            capture_with_prior(&bytes, &name, brdf, &options, prior_arg, &mut show)
-        }
-        (None, Some(prior_arg)) => capture_auto(
-            &bytes,
-            &name,
-            &options,
-            prior_arg,
-            args.tolerance,
-            &mut show,
-        ),
-        (None, None) => unreachable!("--brdf auto always opens the model folder"),
-    };
-    bar.finish_and_clear();
-    let result = result?;
-    let exports = Exports {
-        gltf: args.gltf,
-        mtlx: args.mtlx,
-    };
-    let textures = write_capture(&result, &args.out, exports)?;
-    let (row, col) = result.highlight.pixel;
-    writeln!(
-        out,
-        "captured {} as {} ({}², a square of {:.3} at flash height 1 from a {:.1}° field of view ({}); \
-         flash above pixel ({row:.1}, {col:.1}) by {}, gain {:.3}{}): \
-         loss {:.4} → {:.4} in {} steps, {:.1} s",
-        name,
-        result.brdf.name(),
-        options.size,
-        result.side,
-        result.fov.degrees,
-        result.fov.source,
-        result.highlight.source,
-        result.gain,
-        result
-            .vignetting
-            .map_or(String::new(), |a| format!(", vignetting {a:.3}"))
-            + &result
-                .ambient
-                .map_or(String::new(), |c| format!(", ambient {c:.3}")),
-        result.losses.first().copied().unwrap_or(f64::NAN),
-        result.losses.last().copied().unwrap_or(f64::NAN),
-        result.losses.len(),
-        result.seconds
-    )?;
-    if let Some(coarse) = &result.coarse {
-        writeln!(
-            out,
-            "  of which {} steps at {}² in {:.1} s, the last {} at {}²",
-            coarse.steps,
-            coarse.size,
-            coarse.seconds,
-            result.losses.len() - coarse.steps,
-            options.size
-        )?;
-    }
-    if let Some(prior) = &result.prior {
-        let inversion = &prior.inversion;
-        writeln!(
-            out,
-            "  generator prior from {}: inversion loss {:.4} → {:.4} in {} steps, {:.1} s",
-            prior.model,
-            inversion.losses.first().copied().unwrap_or(f64::NAN),
-            inversion.losses.last().copied().unwrap_or(f64::NAN),
-            inversion.losses.len(),
-            inversion.seconds
-        )?;
-    }
-    if let Some(selection) = &result.selection {
-        let errors: Vec<String> = selection
-            .candidates
-            .iter()
-            .map(|c| format!("{} {:.4}", c.brdf, c.l1_linear))
-            .collect();
-        writeln!(
-            out,
-            "  --brdf auto (tolerance {}): {} of {} (linear L1 of E's maps: {})",
-            selection.tolerance,
-            selection.chosen,
-            selection.candidates.len(),
-            errors.join(", ")
-        )?;
-    }
-    let dir = args.out.display();
-    writeln!(
-        out,
-        "  {dir}/material/  the maps (photomat render --maps {dir}/material --orbit 8)"
-    )?;
-    let documents = match (args.gltf, args.mtlx) {
-        (true, true) => " and material.{gltf,mtlx}",
-        (true, false) => " and material.gltf",
-        (false, true) => " and material.mtlx",
-        (false, false) => "",
-    };
-    writeln!(
-        out,
-        "  {dir}/export/  renderer textures ({}){documents}",
-        textures.files().join(", ")
-    )?;
-    let panels = if result.prior.is_some() {
-        "photo | M's relighting | E's maps | re-render | ×4 error"
-    } else {
-        "photo | re-render | ×4 error"
-    };
-    writeln!(out, "  {dir}/sheet.png  {panels}")?;
-    writeln!(
-        out,
-        "  {dir}/relit.png  the maps under eight new flash positions"
-    )?;
-    writeln!(
-        out,
-        "  {dir}/capture.json  geometry, highlight, gain, losses, timings"
-    )?;
-    Ok(())
+    Ok(CaptureJob {
+        photo: args.photo.clone(),
+        out: args.out.clone(),
+        brdf,
+        start,
+        model_dir,
+        options,
+        prior_options,
+        prior_dir: args.prior_model.clone(),
+        known: args.known.clone(),
+        exports: Exports {
+            gltf: args.gltf,
+            mtlx: args.mtlx,
+        },
+        overwrite: args.overwrite,
+    })
 }
