@@ -25,6 +25,13 @@ With `--capture-set`, every photo also gets its truth maps in its own pixel grid
 flashes of `photomat capture`'s relighting (OUT/held/NNNNNN/K.exr), registered to the photo's
 pixels: what `capture/examples/mitsuba_validation.rs` judges captures against
 (validation/README.md, "A capture set").
+
+With `--library LIB --split test`, the planes are textured with the materials of a photomat
+material library's split instead (`photomat library import`, docs/data.md): each material's
+`ggx` folder gives the base colour, the artist's normal map and the roughness (a map, or for a
+material whose package gave none a roughness drawn per photo), tiled over the plane at a random
+scale; the specular stays the principled BSDF's dielectric 0.04. Photo i shows material
+i mod M of the split. The truth is written as for `--capture-set`.
 """
 
 import argparse
@@ -112,18 +119,82 @@ def texture_maps(name, tint, rng, relief, relief_source="luminance"):
     return albedo, n * 0.5 + 0.5
 
 
-def scene_dict(mi, camera, target, flash, fov, albedo, normals, roughness, principal_point=(0.0, 0.0), size=SIZE):
+def library_materials(library, split):
+    """The material folders of `split` in the library at `library` (its library.json), in index
+    order."""
+    with open(os.path.join(library, "library.json")) as f:
+        index = json.load(f)
+    return [
+        (m["id"], os.path.join(library, "materials", m["id"], "ggx"))
+        for m in index["materials"]
+        if m["split"] == split
+    ]
+
+
+def read_map(folder, entry, channels):
+    """One map of a photomat material folder as an (H, W, channels) array of stored values in
+    [0, 1] (its PNG; a constant map's value broadcast), and whether it was a constant."""
+    from PIL import Image
+
+    if "value" in entry:
+        return np.array(entry["value"], dtype=np.float64).reshape(1, 1, -1), True
+    image = Image.open(os.path.join(folder, entry["png"]))
+    bits = 65535.0 if image.mode.startswith("I;16") or image.mode == "I" else 255.0
+    array = np.asarray(image, dtype=np.float64) / bits
+    if array.ndim == 2:
+        array = array[..., None]
+    if array.shape[-1] == 1 and channels == 3:
+        array = np.repeat(array, 3, axis=-1)
+    return array[..., :channels], False
+
+
+def library_maps(folder, rng):
+    """(base colour in linear rgb, normal map in [0, 1], roughness (a number or (H, W, 1)))
+    of a library material's `ggx` folder, flipped upside down: Mitsuba's bitmap puts row 0 at
+    v = 0, the bottom of the plane, and photomat's maps have row 0 at the top (+y). The
+    normals keep their components (x right, y up: the rectangle's tangent frame). A material
+    whose package gave no roughness (`source.roughness.from` = default) gets one uniform in
+    [0.25, 0.9], as `photomat simulate --library` draws it."""
+    with open(os.path.join(folder, "material.json")) as f:
+        manifest = json.load(f)
+    entries = {m["name"]: m for m in manifest["maps"]}
+    diffuse, _ = read_map(folder, entries["diffuse"], 3)
+    normal, _ = read_map(folder, entries["normal"], 3)
+    roughness, constant = read_map(folder, entries["roughness"], 1)
+    size = normal.shape[0]
+    # The PNG holds the albedo display-encoded (x^(1/2.2)).
+    albedo = np.broadcast_to(diffuse**2.2, (size, size, 3))
+    source = manifest.get("source", {}).get("roughness", {})
+    if constant:
+        value = float(roughness.ravel()[0])
+        if source.get("from") == "default":
+            value = float(rng.uniform(0.25, 0.9))
+        rough = value
+    else:
+        rough = np.flipud(roughness)
+    return np.flipud(albedo).copy(), np.flipud(normal).copy(), rough
+
+
+def scene_dict(
+    mi, camera, target, flash, fov, albedo, normals, roughness, principal_point=(0.0, 0.0), size=SIZE, uv_scale=1.0
+):
     """The Mitsuba scene of one photo; `principal_point` is the sensor's principal point
-    offset (fractions of the film's width and height, Mitsuba's convention)."""
+    offset (fractions of the film's width and height, Mitsuba's convention); `roughness` a
+    number or an (H, W, 1) map; the textures repeat `uv_scale` times across the plane."""
     T = mi.ScalarTransform4f
+
+    def bitmap(array):
+        return {
+            "type": "bitmap",
+            "bitmap": mi.Bitmap(np.ascontiguousarray(array, dtype=np.float32)),
+            "raw": True,
+            "to_uv": mi.ScalarTransform4f().scale([uv_scale, uv_scale, 1.0]),
+        }
+
     principled = {
         "type": "principled",
-        "base_color": {
-            "type": "bitmap",
-            "bitmap": mi.Bitmap(albedo.astype(np.float32)),
-            "raw": True,
-        },
-        "roughness": roughness,
+        "base_color": bitmap(albedo),
+        "roughness": roughness if np.isscalar(roughness) else bitmap(roughness),
         "specular": PRINCIPLED_SPECULAR,
     }
     return {
@@ -152,11 +223,7 @@ def scene_dict(mi, camera, target, flash, fov, albedo, normals, roughness, princ
             "to_world": T().scale([1.5, 1.5, 1.0]),
             "bsdf": {
                 "type": "normalmap",
-                "normalmap": {
-                    "type": "bitmap",
-                    "bitmap": mi.Bitmap(normals.astype(np.float32)),
-                    "raw": True,
-                },
+                "normalmap": bitmap(normals),
                 "bsdf": principled,
             },
         },
@@ -224,9 +291,20 @@ def render(mi, p, rng, albedo=None, normals=None, principal_point=(0.0, 0.0), si
     """Linear rgb render (size, size, 3) of the parameters `p`."""
     if albedo is None:
         albedo, normals = texture_maps(p["texture"], p["tint"], rng, p["relief"])
+    roughness = p.get("roughness_map", p["roughness"])
     scene = mi.load_dict(
         scene_dict(
-            mi, p["camera"], p["target"], p["flash"], p["fov"], albedo, normals, p["roughness"], principal_point, size
+            mi,
+            p["camera"],
+            p["target"],
+            p["flash"],
+            p["fov"],
+            albedo,
+            normals,
+            roughness,
+            principal_point,
+            size,
+            p.get("uv_scale", 1.0),
         )
     )
     return np.array(mi.render(scene, seed=int(rng.integers(1 << 31))))
@@ -278,9 +356,10 @@ def truth_maps(p, albedo, normals, size, supersample=3):
     rows, cols = np.mgrid[0 : size * k, 0 : size * k]
     points = unproject((rows.ravel() + 0.5) / k, (cols.ravel() + 0.5) / k, p["camera"], p["frame"], p["fov"], size)
     # The 3 × 3 rectangle's uv: (x + 1.5) / 3, (y + 1.5) / 3 (checked against Mitsuba's uv AOV).
-    u = (points[:, 0] + 1.5) / 3
-    v = (points[:, 1] + 1.5) / 3
+    u = (points[:, 0] + 1.5) / 3 * p.get("uv_scale", 1.0)
+    v = (points[:, 1] + 1.5) / 3 * p.get("uv_scale", 1.0)
     diffuse = bilinear(albedo, u, v)
+    roughness = bilinear(p["roughness_map"], u, v) if "roughness_map" in p else None
     world = bilinear(normals * 2 - 1, u, v)
     world /= np.linalg.norm(world, axis=-1, keepdims=True)
     ax, ay, az = plane_axes(p["frame"])
@@ -291,7 +370,7 @@ def truth_maps(p, albedo, normals, size, supersample=3):
 
     normal = pool(normal)
     normal /= np.linalg.norm(normal, axis=-1, keepdims=True)
-    return pool(diffuse), normal
+    return pool(diffuse), normal, None if roughness is None else pool(roughness)
 
 
 # Held-out renders: rendered HELD_SCALE× finer than the photo over a field of view
@@ -385,11 +464,17 @@ def write_exr(mi, path, array):
 
 def write_truth(mi, folder, diffuse, normal, roughness, specular):
     """The truth as a photomat material folder of model `ggx` (docs/datasets.md): EXR maps and
-    material.json; specular and roughness are constants of the principled BSDF."""
+    material.json; specular is the principled BSDF's constant, roughness a constant or an
+    (H, W, 1) map."""
     os.makedirs(folder, exist_ok=True)
     size = diffuse.shape[0]
     write_exr(mi, os.path.join(folder, "diffuse.exr"), diffuse)
     write_exr(mi, os.path.join(folder, "normal.exr"), normal)
+    if np.isscalar(roughness):
+        rough_entry = {"value": [roughness]}
+    else:
+        write_exr(mi, os.path.join(folder, "roughness.exr"), roughness)
+        rough_entry = {"exr": "roughness.exr"}
     entry = lambda name, space, lo, **kw: {
         "name": name, "channels": 1 if name == "roughness" else 3, "color_space": space, "range": [lo, 1.0], **kw
     }
@@ -401,7 +486,7 @@ def write_truth(mi, folder, diffuse, normal, roughness, specular):
         "maps": [
             entry("diffuse", "gamma22", 0.0, exr="diffuse.exr"),
             entry("specular", "gamma22", 0.0, value=[specular] * 3),
-            entry("roughness", "linear", 0.0, value=[roughness]),
+            entry("roughness", "linear", 0.0, **rough_entry),
             entry("normal", "unit-vector", -1.0, exr="normal.exr"),
         ],
     }
@@ -442,6 +527,12 @@ def main():
         "linear, without the phone's pipeline)",
     )
     parser.add_argument(
+        "--library",
+        help="a photomat material library: texture the planes with the materials of --split (ggx maps, "
+        "the artist's normals) instead of scikit-image's photos",
+    )
+    parser.add_argument("--split", default="test", choices=["train", "validation", "test"])
+    parser.add_argument(
         "--relief-source",
         choices=["luminance", "independent"],
         default="luminance",
@@ -458,10 +549,26 @@ def main():
         return
     os.makedirs(os.path.join(args.out, "photos"), exist_ok=True)
     rng = np.random.default_rng(args.seed)
+    materials = library_materials(args.library, args.split) if args.library else None
+    if materials is not None and not materials:
+        sys.exit(f"{args.library} has no {args.split} materials")
     photos = []
     for index in range(args.count):
         p = draw(rng, index)
-        albedo, normals = texture_maps(p["texture"], p["tint"], rng, p["relief"], args.relief_source)
+        if materials is not None:
+            material_id, folder = materials[index % len(materials)]
+            albedo, normals, rough = library_maps(folder, rng)
+            p["texture"] = material_id
+            if np.isscalar(rough):
+                p["roughness"] = rough
+            else:
+                p["roughness_map"] = rough
+                p["roughness"] = float(rough.mean())
+            # The material spans 2/z of the photo's square (camera height ~1), z in [0.5, 1.5]
+            # as `photomat simulate --library`: 1.5·z repeats over the 3-unit plane.
+            p["uv_scale"] = 1.5 * float(np.exp(rng.uniform(np.log(0.5), np.log(1.5))))
+        else:
+            albedo, normals = texture_maps(p["texture"], p["tint"], rng, p["relief"], args.relief_source)
         linear = render(mi, p, rng, albedo, normals)
         jpeg = develop(linear, rng, p["vignetting"], p["noise"], p["exposure"], p["quality"])
         name = f"photos/{index:06}.jpg"
@@ -484,14 +591,17 @@ def main():
                     "roughness": p["roughness"],
                     "relief": p["relief"],
                     "relief_source": args.relief_source,
-                },
+                }
+                if materials is None
+                else {"library": args.library, "id": p["texture"], "roughness": p["roughness"], "uv_scale": p["uv_scale"]},
                 "pipeline": {k: p[k] for k in ["vignetting", "noise", "exposure", "quality"]},
             }
         )
         if args.capture_set:
             truth = f"truth/{index:06}"
-            diffuse, normal = truth_maps(p, albedo, normals, SIZE)
-            write_truth(mi, os.path.join(args.out, truth), diffuse, normal, p["roughness"], PRINCIPLED_F0)
+            diffuse, normal, rough_map = truth_maps(p, albedo, normals, SIZE)
+            rough_truth = p["roughness"] if rough_map is None else rough_map
+            write_truth(mi, os.path.join(args.out, truth), diffuse, normal, rough_truth, PRINCIPLED_F0)
             # Its own stream, so that the photos are the same with and without --capture-set.
             held_rng = np.random.default_rng([args.seed, index])
             held = []

@@ -39,6 +39,8 @@
 //!   material under moving flashes;
 //! - `photomat train-estimator --gan RUN --brdf SPEC --out MODEL`: E for any registered model;
 //!   MODEL is a complete model folder (GAN + estimator);
+//! - `photomat train-prior --library LIB --brdf SPEC --out RUN --steps N`: the relief prior,
+//!   one flash photo → SPEC's maps, trained on photos of the library;
 //! - `photomat sample [--model MODEL] --count N --out OUT [--gltf] [--mtlx] [--hextile]`: maps,
 //!   renders, contact sheet and renderer exports of sampled materials;
 //! - `photomat bench`: whole training and sampling steps timed (JSON), the Rust side of
@@ -95,6 +97,8 @@ enum Command {
     Relight(commands::relight::Args),
     /// Train the map estimator E for a named BRDF model against a frozen GAN.
     TrainEstimator(commands::train_estimator::Args),
+    /// Train the relief prior, one flash photo → a model's maps, on photos of a library.
+    TrainPrior(commands::train_prior::Args),
     /// Fit the maps of a named BRDF model to one phone flash photo.
     Capture(commands::capture::Args),
     /// Sample materials from a trained model: maps, renders, contact sheet, glTF/MaterialX.
@@ -123,6 +127,7 @@ impl Command {
             Command::RankSnapshots(args) => commands::rank_snapshots::run(args, out),
             Command::Relight(args) => commands::relight::run(args, out),
             Command::TrainEstimator(args) => commands::train_estimator::run(args, out),
+            Command::TrainPrior(args) => commands::train_prior::run(args, out),
             Command::Sample(args) => commands::sample::run(args, out),
             Command::Trade(args) => commands::trade::run(args, out),
             Command::Bench(args) => commands::bench::run(args, out),

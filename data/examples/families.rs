@@ -12,7 +12,8 @@ use std::time::Instant;
 
 use candle_core::Device;
 use photomat_brdfs as _; // link the built-in BRDF plugins
-use photomat_core::image_io::{PlanarImage, PngBits, contact_sheet, write_png};
+use photomat_core::image_io::{PlanarImage, PngBits, write_png};
+use photomat_core::sheet::contact_sheet;
 use photomat_core::{Highlight, encode_display, lookup, render};
 use photomat_data::procedural::families;
 

@@ -1,4 +1,6 @@
-//! Convolution with circular padding: the reference's `CircularConv2d`.
+//! Convolution layers with circular padding (the reference's `CircularConv2d`, what the
+//! estimator uses on periodic materials) or zero padding (what networks on photos use, such as
+//! the relief prior), one layer type for both ([`Conv2dLayer`]).
 //!
 //! PhotoMat's estimator (paper §4 "Implementation"; reference `training/networks.py`,
 //! `CircularConv2d`) pads every convolution's input by wrapping around and then convolves
@@ -20,18 +22,23 @@
 use candle_core::{Result, Tensor, bail};
 use candle_nn::{Conv2d, Conv2dConfig, Init, Module, VarBuilder};
 
-use photomat_kernels::{Conv2dSpec, conv2d};
+use photomat_kernels::{Conv2dSpec, PaddingMode, conv2d};
 
 /// Standard deviation of the initial biases (the reference's `bias.data.normal_(0, 0.02)`).
 const BIAS_INIT_STD: f64 = 0.02;
 
-/// A `k × k` convolution with stride `s` on a periodic image.
+/// A `k × k` "same" convolution with stride `s`, padded circularly (a periodic image) or with
+/// zeros.
 #[derive(Debug, Clone)]
-pub struct CircularConv2d {
+pub struct Conv2dLayer {
     conv: Conv2d,
     pad: usize,
     stride: usize,
+    mode: PaddingMode,
 }
+
+/// The estimator's layer: a [`Conv2dLayer`] with circular padding.
+pub type CircularConv2d = Conv2dLayer;
 
 /// Builds a [`CircularConv2d`] with parameters `weight` (C_out, C_in, k, k) and `bias`
 /// (C_out) under `vb`.
@@ -45,6 +52,26 @@ pub fn circular_conv2d(
     stride: usize,
     vb: VarBuilder,
 ) -> Result<CircularConv2d> {
+    conv2d_layer(
+        in_channels,
+        out_channels,
+        kernel,
+        stride,
+        PaddingMode::Circular,
+        vb,
+    )
+}
+
+/// Builds a [`Conv2dLayer`] padded by `mode`, with parameters `weight` (C_out, C_in, k, k) and
+/// `bias` (C_out) under `vb`; as [`circular_conv2d`] otherwise.
+pub fn conv2d_layer(
+    in_channels: usize,
+    out_channels: usize,
+    kernel: usize,
+    stride: usize,
+    mode: PaddingMode,
+    vb: VarBuilder,
+) -> Result<Conv2dLayer> {
     if stride == 0 || kernel < stride || !(kernel - stride).is_multiple_of(2) {
         bail!(
             "circular conv: kernel {kernel} with stride {stride} cannot keep the size \
@@ -73,14 +100,15 @@ pub fn circular_conv2d(
         stride,
         ..Default::default()
     };
-    Ok(CircularConv2d {
+    Ok(Conv2dLayer {
         conv: Conv2d::new(weight, Some(bias), cfg),
         pad: (kernel - stride) / 2,
         stride,
+        mode,
     })
 }
 
-impl CircularConv2d {
+impl Conv2dLayer {
     /// The wrapped candle-nn convolution (padding 0).
     pub fn conv(&self) -> &Conv2d {
         &self.conv
@@ -92,7 +120,7 @@ impl CircularConv2d {
     }
 }
 
-impl CircularConv2d {
+impl Conv2dLayer {
     /// The convolution without its bias.
     ///
     /// # Shapes
@@ -101,15 +129,16 @@ impl CircularConv2d {
         let (_b, _c, h, w) = x.dims4()?;
         if h % self.stride != 0 || w % self.stride != 0 {
             bail!(
-                "circular conv with stride {}: input {h}×{w} is not a multiple of the stride",
+                "conv layer with stride {}: input {h}×{w} is not a multiple of the stride",
                 self.stride
             );
         }
-        conv2d(
-            x,
-            self.conv.weight(),
-            Conv2dSpec::circular(self.stride, self.pad),
-        )
+        let spec = Conv2dSpec {
+            stride: self.stride,
+            padding: self.pad,
+            mode: self.mode,
+        };
+        conv2d(x, self.conv.weight(), spec)
     }
 
     /// `LeakyReLU(conv(x) + bias, slope)`, the bias and the activation as one fused pass each
@@ -128,7 +157,7 @@ impl CircularConv2d {
     }
 }
 
-impl Module for CircularConv2d {
+impl Module for Conv2dLayer {
     /// # Shapes
     /// (B, C_in, H, W) → (B, C_out, H/s, W/s); H and W must be multiples of the stride s.
     fn forward(&self, x: &Tensor) -> Result<Tensor> {

@@ -98,6 +98,16 @@ pub fn upsample2x_periodic(x: &Tensor) -> Result<Tensor> {
     separable(x, &periodic_upsample_axis(h)?, &periodic_upsample_axis(w)?)
 }
 
+/// ×2 bilinear upsampling of an image that does not wrap around (a photo's): the border texels
+/// repeated beyond the edge ([`clamped_upsample_axis`]).
+///
+/// # Shapes
+/// (B, C, H, W) → (B, C, 2H, 2W); H, W ≥ 1. Any float dtype.
+pub fn upsample2x_clamped(x: &Tensor) -> Result<Tensor> {
+    let (_, _, h, w) = x.dims4()?;
+    separable(x, &clamped_upsample_axis(h)?, &clamped_upsample_axis(w)?)
+}
+
 #[cfg(test)]
 mod tests {
     use candle_core::Var;

@@ -21,7 +21,11 @@
 //! - [`material`]: a library material's two folders (`ggx`, `height`) and its provenance;
 //! - [`index`]: `library.json`, every material with its split, package and licences;
 //! - [`sheet`]: the contact sheet of a sample of the library;
-//! - [`import`]: the importer behind `photomat library import`.
+//! - [`import`]: the importer behind `photomat library import`;
+//! - [`photos`]: a split of the library as the simulator's material family, seen at random
+//!   scales, offsets and orientations, mixed, for flash photos of it;
+//! - [`stats`]: the statistics of a split's true maps, what sampled materials are compared with;
+//! - [`testing`]: a small synthetic library for the tests of what reads libraries.
 
 pub mod convert;
 pub mod decode;
@@ -33,8 +37,11 @@ pub mod material;
 pub mod normals;
 pub mod package;
 pub mod pairing;
+pub mod photos;
 pub mod relief;
 pub mod resample;
 pub mod sheet;
 pub mod split;
+pub mod stats;
+pub mod testing;
 pub mod tree;

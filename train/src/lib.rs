@@ -10,6 +10,7 @@
 //!   after repeated skips with an error naming the step and the loss;
 //! - [`roll`]: per-sample wrap-around rolls of NCHW tensors and material maps (tileable
 //!   training, the estimator's fine-tune);
+//! - [`run_folder`]: the fresh-or-resumed check every trainer makes of its run folder;
 //! - [`run_log`]: a run's `log.csv`, appended row by row and cut back to the checkpoint when
 //!   the run resumes;
 //! - [`settings`]: the one rule by which a trainer's given settings meet its defaults (fresh
@@ -24,6 +25,7 @@
 pub mod adam;
 pub mod nan_guard;
 pub mod roll;
+pub mod run_folder;
 pub mod run_log;
 pub mod settings;
 pub mod varmap;
@@ -31,5 +33,6 @@ pub mod varmap;
 pub use adam::{Adam, AdamConfig};
 pub use nan_guard::{NanGuard, gradients_finite};
 pub use roll::{roll_maps, roll_offsets, roll_per_sample, window_per_sample};
+pub use run_folder::check_run_folder;
 pub use run_log::RunLog;
 pub use settings::{Merged, OnResume, Setting, merge};

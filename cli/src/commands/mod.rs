@@ -18,3 +18,4 @@ pub mod simulate;
 pub mod trade;
 pub mod train_estimator;
 pub mod train_gan;
+pub mod train_prior;

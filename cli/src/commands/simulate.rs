@@ -14,6 +14,12 @@
 //! `--max-tilt` and `--flash-offset` hold the phone as a hand does
 //! (`photomat_data::simulator::pose`): a tilted camera and a flash beside the lens; the true
 //! highlight is then the flash's mirror point as the lens sees it.
+//!
+//! `--library LIB --split train|validation|test` photographs the materials of a material
+//! library's split (`photomat library import`) instead of procedural families: per photo one
+//! material (or a mix of two), seen at a random zoom, offset and orientation
+//! (`photomat_library::photos`, docs/data.md); `simulation.json` names each photo's
+//! material(s) and how they were seen, `truth/` holds their `ggx` maps as photographed.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -25,6 +31,8 @@ use photomat_data::simulator::{
     CameraModel, CameraSource, HighlightJitter, PhoneCamera, PhotoFormat, PoseJitter,
     SimulationConfig, SimulationManifest, simulate,
 };
+
+use photomat_library::photos::{Augmentation, LibraryFamily};
 
 use crate::common::{parse_pair, progress_bar};
 
@@ -75,8 +83,37 @@ pub struct Args {
     pub format: Format,
 
     /// Material families to cycle through, comma-separated (default: all).
-    #[arg(long, value_name = "NAMES", value_delimiter = ',')]
+    #[arg(
+        long,
+        value_name = "NAMES",
+        value_delimiter = ',',
+        conflicts_with = "library"
+    )]
     pub families: Vec<String>,
+
+    /// A material library (`photomat library import` output): photograph its materials
+    /// instead of procedural families.
+    #[arg(long, value_name = "LIB", requires = "split")]
+    pub library: Option<PathBuf>,
+
+    /// The library's split to photograph: train, validation or test.
+    #[arg(long, value_name = "SPLIT", requires = "library")]
+    pub split: Option<photomat_library::split::Split>,
+
+    /// Leave out library materials with this licence (repeatable), e.g. `GPL-3+` for photos
+    /// a model under CC-BY-SA is trained on (docs/data.md, "Licences").
+    #[arg(long, value_name = "LICENCE", requires = "library")]
+    pub exclude_licence: Vec<String>,
+
+    /// Range of library materials across one photo, LO,HI (log-uniform; materials are
+    /// periodic).
+    #[arg(long, value_name = "LO,HI", default_value = "0.5,1.5", value_parser = parse_offset_range,
+          requires = "library")]
+    pub zoom: (f64, f64),
+
+    /// Probability that a photo of the library shows a mix of two materials.
+    #[arg(long, value_name = "P", default_value_t = 0.2, requires = "library")]
+    pub mix_prob: f64,
 
     /// Camera model.
     #[arg(long, value_enum, default_value_t = Camera::Phone)]
@@ -116,18 +153,32 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
             args.jitter
         );
     }
-    let chosen: Vec<Box<dyn Family>> = if args.families.is_empty() {
-        families()
-    } else {
-        let mut names: Vec<&str> = args.families.iter().map(|n| n.trim()).collect();
-        names.sort();
-        names.dedup();
-        names
-            .iter()
-            .map(|name| family(name))
-            .collect::<Result<_, _>>()
-            .context("invalid --families")?
-    };
+    let chosen: Vec<Box<dyn Family>> =
+        if let (Some(library), Some(split)) = (&args.library, args.split) {
+            if !(0.0..=1.0).contains(&args.mix_prob) {
+                bail!("--mix-prob must lie in [0, 1], got {}", args.mix_prob);
+            }
+            let augmentation = Augmentation {
+                zoom: args.zoom,
+                mix_probability: args.mix_prob,
+                ..Augmentation::default()
+            };
+            vec![Box::new(
+                LibraryFamily::open(library, split, &args.exclude_licence, augmentation)
+                    .context("invalid --library")?,
+            )]
+        } else if args.families.is_empty() {
+            families()
+        } else {
+            let mut names: Vec<&str> = args.families.iter().map(|n| n.trim()).collect();
+            names.sort();
+            names.dedup();
+            names
+                .iter()
+                .map(|name| family(name))
+                .collect::<Result<_, _>>()
+                .context("invalid --families")?
+        };
     let config = SimulationConfig {
         count: args.count as usize,
         size: args.size as usize,

@@ -64,6 +64,12 @@ pub trait Family: Send + Sync {
 
     /// Maps (1, C, size, size), f32, for material number `seed` of the family.
     fn generate(&self, size: usize, seed: u64, device: &Device) -> Result<MaterialMaps>;
+
+    /// What material number `seed` is, when the family can say more than its seed (a
+    /// material library's family: which material, seen how), for the photo's record.
+    fn describe(&self, _seed: u64) -> Option<String> {
+        None
+    }
 }
 
 /// A family whose members are [`Pattern`]s drawn from a seed, which is how every built-in

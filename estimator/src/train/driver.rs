@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use candle_core::Device;
 use photomat_core::image_io::{PlanarImage, PngBits, write_png};
 use photomat_core::previews::map_previews;
@@ -86,19 +86,7 @@ impl EstimatorTraining {
         device: &Device,
     ) -> anyhow::Result<Self> {
         let lock = FolderLock::acquire(run, "photomat train-estimator")?;
-        let state = run.join(TRAIN_STATE_FILE);
-        if resume && !state.exists() {
-            bail!(
-                "cannot resume: {} does not exist (start the run without --resume)",
-                state.display()
-            );
-        }
-        if !resume && state.exists() {
-            bail!(
-                "{} already holds an estimator run; continue it with --resume or choose another --out",
-                run.display()
-            );
-        }
+        photomat_train::check_run_folder(run, TRAIN_STATE_FILE, resume, "an estimator run")?;
         let saved = if resume {
             Some((TrainManifest::load(run)?, run.join(TRAIN_MANIFEST_FILE)))
         } else {

@@ -162,19 +162,7 @@ impl GanTraining {
     /// `run` already holds one), from `run/train.json` on `resume` after checking that no
     /// setting contradicts it.
     pub fn plan(run: &Path, settings: &GanSettings, resume: bool) -> anyhow::Result<RunPlan> {
-        let state = run.join(STATE_FILE);
-        if resume && !state.exists() {
-            bail!(
-                "cannot resume: {} does not exist (start the run without --resume)",
-                state.display()
-            );
-        }
-        if !resume && state.exists() {
-            bail!(
-                "{} already holds a training run; continue it with --resume or choose another --out",
-                run.display()
-            );
-        }
+        photomat_train::check_run_folder(run, STATE_FILE, resume, "a training run")?;
         let saved = if resume {
             Some((read_config(run)?, run.join(CONFIG_FILE)))
         } else {
