@@ -25,22 +25,21 @@
 
 use std::io::Write;
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::Context;
-use candle_core::Device;
-use photomat_data::discriminator_probe::{BLUR_RADII, DiscriminatorProbe, probe_discriminator};
+use photomat_core::map_distribution::{MapDistributionTable, StatisticDistance, compare};
+use photomat_data::gan_evaluation::{GanEvaluationSettings, evaluate_gan};
 use photomat_data::highlight::DetectorKind;
-use photomat_data::light_following::{LightFollowing, light_following};
-use photomat_data::patch::PatchOptions;
-use photomat_data::relief_signature::{ReliefSignature, model_relief_signature};
-use photomat_data::source::DatasetSource;
-use photomat_generator::GanModel;
-use photomat_generator::swd::{EvalPhase, FakeWindows, SwdConfig, SwdReport, model_swd};
-use photomat_generator::train::config::DEFAULT_HIGHLIGHT_PROB;
-use serde_json::json;
+use photomat_estimator::map_distribution::sampled_stats;
+use photomat_generator::swd::EvalPhase;
+use photomat_library::split::Split;
+use photomat_library::stats::split_stats;
 
 use crate::common::{parse_detector, progress_bar};
+
+/// Most materials the map comparison samples: 64 give each statistic's median to a few %, and
+/// sampling more only costs time.
+const MAX_MAP_MATERIALS: usize = 64;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -92,248 +91,87 @@ pub struct Args {
     #[arg(long)]
     pub discriminator: bool,
 
+    /// A material library: also compare the model folder's estimator's maps of sampled
+    /// materials (up to 64 of --count) with the true maps of the library's split: the
+    /// diffuse, specular and roughness levels and spreads and the normals' spread and tilt,
+    /// each a 1-D Wasserstein distance (flat normals where real materials have relief fail it).
+    #[arg(long, value_name = "LIB")]
+    pub library: Option<PathBuf>,
+
+    /// The library's split the maps are compared with.
+    #[arg(
+        long,
+        value_name = "SPLIT",
+        default_value = "validation",
+        requires = "library"
+    )]
+    pub library_split: Split,
+
+    /// Side of the compared materials (sampled, and the library's box-filtered to it); a
+    /// multiple of the estimator's stride.
+    #[arg(long, value_name = "N", default_value_t = 256, requires = "library",
+          value_parser = clap::value_parser!(u32).range(32..=2048))]
+    pub map_size: u32,
+
     /// Print the result as JSON instead of a table.
     #[arg(long)]
     pub json: bool,
 }
 
 pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
-    let device = Device::Cpu;
-    let model = GanModel::load(&args.gan, &device)
-        .with_context(|| format!("cannot load the GAN model in '{}'", args.gan.display()))?;
-    let resolution = model.config().resolution;
-    let (data, windows, window) = match (args.stretched_to_patches, args.sample_size) {
-        (Some(_), _) if model.config().spatial.is_some() => anyhow::bail!(
-            "--stretched-to-patches is for fixed-size models; '{}' is spatial (its samples \
-             are already at the photos' scale)",
-            args.gan.display()
-        ),
-        (Some(p), _) => {
-            let patches = PatchOptions {
-                size: p as usize,
-                highlight_prob: DEFAULT_HIGHLIGHT_PROB,
-            };
-            let data = DatasetSource::open_patches(&args.data, patches);
-            (data, FakeWindows::Stretched, p as usize)
-        }
-        (None, Some(n)) => {
-            let data = DatasetSource::for_model(&args.data, model.config());
-            let windows = FakeWindows::OfLargerSamples { side: n as usize };
-            (data, windows, resolution)
-        }
-        (None, None) => {
-            let data = DatasetSource::for_model(&args.data, model.config());
-            (data, FakeWindows::Native, resolution)
-        }
+    let settings = GanEvaluationSettings {
+        gan: args.gan.clone(),
+        data: args.data.clone(),
+        count: args.count as usize,
+        seed: args.seed,
+        detector: args.detector,
+        sample_size: args.sample_size.map(|n| n as usize),
+        stretched_to_patches: args.stretched_to_patches.map(|p| p as usize),
+        discriminator: args.discriminator,
     };
-    let data = data.with_context(|| {
-        format!(
-            "cannot compare the {resolution}×{resolution} model in '{}' with the data set '{}'",
-            args.gan.display(),
-            args.data.display()
-        )
-    })?;
-    let count = args.count as usize;
-
+    let count = args.count;
     let bar = progress_bar(
-        2 * args.count,
+        2 * count,
         "{elapsed_precise} [{bar:40}] {pos}/{len} images: {msg} ({eta} left)",
     );
-    let start = Instant::now();
-    let report = model_swd(
-        &model,
-        &data,
-        count,
-        args.seed,
-        windows,
-        &SwdConfig::default(),
-        &mut |phase, done| match phase {
-            EvalPhase::Fakes => {
-                bar.set_message("relighting samples");
-                bar.set_position(done as u64);
-            }
-            EvalPhase::Reals => {
-                bar.set_message("cropping the data set");
-                bar.set_position((count + done) as u64);
-            }
-        },
-    );
-    bar.finish_and_clear();
-    let report = report.with_context(|| {
-        format!(
-            "cannot measure the SWD of '{}' against '{}'",
-            args.gan.display(),
-            args.data.display()
-        )
-    })?;
-    let following = match model.config().spatial {
-        None => None,
-        Some(_) if args.sample_size.is_some() => None,
-        Some(_) => {
-            let detector = args
-                .detector
-                .unwrap_or(data.dataset().index().detector)
-                .build();
-            Some(
-                light_following(&model, data.dataset(), detector.as_ref(), count, args.seed)
-                    .context("cannot measure whether the relighting follows the light")?,
-            )
+    let evaluation = evaluate_gan(&settings, &mut |phase, done| match phase {
+        EvalPhase::Fakes => {
+            bar.set_message("relighting samples");
+            bar.set_position(done as u64);
         }
+        EvalPhase::Reals => {
+            bar.set_message("cropping the data set");
+            bar.set_position(count + done as u64);
+        }
+    });
+    bar.finish_and_clear();
+    let evaluation = evaluation?;
+    let maps = match &args.library {
+        Some(library) => Some(map_distribution(args, library)?),
+        None => None,
     };
-    let relief = following
-        .as_ref()
-        .map(|f| model_relief_signature(&model, f.photo_size, count, args.seed))
-        .transpose()
-        .context("cannot measure whether the relighting shows relief")?;
-    let probe = args
-        .discriminator
-        .then(|| probe_discriminator(&args.gan, Some(&args.data), count, args.seed))
-        .transpose()
-        .with_context(|| {
-            format!(
-                "cannot probe the discriminator of the run '{}' (--discriminator needs a \
-                 `photomat train-gan` run folder)",
-                args.gan.display()
-            )
-        })?;
-    let seconds = start.elapsed().as_secs_f64();
-    print_report(
-        args,
-        (resolution, window),
-        &report,
-        (following.as_ref(), relief.as_ref()),
-        probe.as_ref(),
-        seconds,
-        out,
-    )
+    if args.json {
+        let mut value = evaluation.to_json();
+        value["maps"] = serde_json::to_value(&maps)?;
+        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
+    } else {
+        writeln!(out, "{evaluation}")?;
+        if let Some(rows) = &maps {
+            writeln!(out, "{}", MapDistributionTable(rows))?;
+        }
+    }
+    Ok(())
 }
 
-/// The measurement as JSON (`--json`) or as a table; `resolution` is the model's side,
-/// `window` the side of the compared images; the light-following and relief checks are those
-/// of a spatial model.
-fn print_report(
+/// E's maps of sampled materials against the library split's true maps.
+fn map_distribution(
     args: &Args,
-    (resolution, window): (usize, usize),
-    report: &SwdReport,
-    (following, relief): (Option<&LightFollowing>, Option<&ReliefSignature>),
-    probe: Option<&DiscriminatorProbe>,
-    seconds: f64,
-    out: &mut dyn Write,
-) -> anyhow::Result<()> {
-    let count = args.count as usize;
-    if args.json {
-        let levels: Vec<_> = report
-            .per_level
-            .iter()
-            .map(|&(side, swd)| json!({ "side": side, "swd_x1e3": swd }))
-            .collect();
-        let value = json!({
-            "gan": args.gan.display().to_string(),
-            "data": args.data.display().to_string(),
-            "resolution": resolution,
-            "window": window,
-            "sample_size": args.sample_size.map_or(resolution, |n| n as usize),
-            "stretched_to_patches": args.stretched_to_patches,
-            "count": count,
-            "seed": args.seed,
-            "levels": levels,
-            "mean_x1e3": report.mean,
-            "light_following_pct_of_width": following,
-            "relief_signature": relief,
-            "discriminator": probe,
-            "seconds": seconds,
-        });
-        writeln!(out, "{}", serde_json::to_string_pretty(&value)?)?;
-        return Ok(());
-    }
-    let cut = match (args.sample_size, args.stretched_to_patches) {
-        (Some(n), _) => format!(", windows of {n}×{n} samples"),
-        (_, Some(_)) => ", centre windows of materials stretched to the photos' scale".into(),
-        _ => String::new(),
-    };
-    writeln!(
-        out,
-        "SWD ×10³ between {count} relit samples of '{}' and {count} crops of '{}' \
-         ({window}×{window}{cut}, seed {}; lower is closer):",
-        args.gan.display(),
-        args.data.display(),
-        args.seed
-    )?;
-    writeln!(out, "{:>9}  {:>10}", "level", "SWD×1e3")?;
-    for &(s, swd) in &report.per_level {
-        writeln!(out, "{:>9}  {swd:>10.3}", format!("{s}×{s}"))?;
-    }
-    writeln!(out, "{:>9}  {:>10.3}", "mean", report.mean)?;
-    if let Some(f) = following {
-        writeln!(
-            out,
-            "light following: detected vs conditioned highlight, % of the {s}-texel width \
-             ({n} images each; near the reals' figure: M follows the light):",
-            s = f.size,
-            n = f.count
-        )?;
-        writeln!(
-            out,
-            "{:>9}  {:>6}  {:>6}  {:>6}  {:>6}",
-            "", "mean", "median", "p90", "max"
-        )?;
-        let photo = format!("M {}²", f.photo_size);
-        for (name, d) in [
-            ("M", &f.fakes),
-            ("reals", &f.reals),
-            (photo.as_str(), &f.photo_fakes),
-            ("centre", &f.photo_centre_guess),
-        ] {
-            writeln!(
-                out,
-                "{name:>9}  {:>6.1}  {:>6.1}  {:>6.1}  {:>6.1}",
-                d.mean, d.median, d.p90, d.max
-            )?;
-        }
-        writeln!(
-            out,
-            "(M {s}²: whole-photo samples, highlights uniform over the central half, where the \
-             detector's own error is below 1 %; centre: always guessing the centre there)",
-            s = f.photo_size
-        )?;
-    }
-    if let Some(r) = relief {
-        writeln!(
-            out,
-            "relief: R² of the detail of log(image under +y light / under −y light) with the \
-             texture's derivative along y {:.3} (relief), along x {:.3} (control), the texture \
-             itself {:.3} ({count} materials at the photos' scale)",
-            r.along, r.across, r.texture
-        )?;
-        if let Some(degrees) = r.m_relief_rms_degrees {
-            writeln!(out, "M's own relief normals: {degrees:.2}° rms from +z")?;
-        }
-    }
-    if let Some(p) = probe {
-        writeln!(
-            out,
-            "what D looks at (step {}, mean logit over {} images each; higher: more real):",
-            p.step, p.count
-        )?;
-        let [r1, r3] = BLUR_RADII.map(|r| 2 * r + 1);
-        for (name, value) in [
-            ("reals".to_string(), p.reals),
-            ("reals, other lights".to_string(), p.reals_other_lights),
-            (format!("reals blurred {r1}×{r1}"), p.reals_blurred[0]),
-            (format!("reals blurred {r3}×{r3}"), p.reals_blurred[1]),
-            ("fakes".to_string(), p.fakes),
-            ("fakes, other lights".to_string(), p.fakes_other_lights),
-        ] {
-            writeln!(out, "{name:>22}  {value:>+8.3}")?;
-        }
-        writeln!(
-            out,
-            "texture gap (reals − blurred reals) {:+.3}, light gap (reals − other lights) {:+.3}: \
-             a gap near 0 is something D does not look at, and G will not learn",
-            p.texture_gap(),
-            p.light_gap()
-        )?;
-    }
-    writeln!(out, "measured in {seconds:.1} s")?;
-    Ok(())
+    library: &std::path::Path,
+) -> anyhow::Result<Vec<StatisticDistance>> {
+    let count = (args.count as usize).min(MAX_MAP_MATERIALS);
+    let side = args.map_size as usize;
+    let sampled = sampled_stats(&args.gan, count, side, args.seed)?;
+    let reference = split_stats(library, args.library_split, count, side)
+        .with_context(|| format!("cannot read the library '{}'", library.display()))?;
+    Ok(compare(&sampled, &reference))
 }
