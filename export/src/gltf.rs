@@ -25,7 +25,7 @@ use photomat_core::{Error, Result};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
 
-use crate::textures::{DIELECTRIC_F0, TextureSet};
+use crate::textures::{DIELECTRIC_F0, Factors, TextureSet};
 
 /// `KHR_materials_specular`: coloured F0 of the dielectric layer.
 pub const KHR_MATERIALS_SPECULAR: &str = "KHR_materials_specular";
@@ -262,19 +262,74 @@ fn quad_buffer(tangents: bool) -> (Vec<u8>, Vec<Accessor>, Vec<BufferView>) {
     (bytes, accessors, views)
 }
 
-/// The glTF document for `textures` whose buffer is the file `bin_uri`; `name` names the
-/// material, mesh and node.
-pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
-    let (bytes, accessors, buffer_views) = quad_buffer(textures.normal.is_some());
+/// The quad's mesh: positions, normals, uvs, and tangents where a normal texture needs them.
+fn quad_mesh(name: &str, with_tangents: bool) -> Mesh {
     let mut attributes = BTreeMap::from([
         ("POSITION".to_string(), 0),
         ("NORMAL".to_string(), 1),
         ("TEXCOORD_0".to_string(), 2),
     ]);
-    if textures.normal.is_some() {
+    if with_tangents {
         attributes.insert("TANGENT".to_string(), 3);
     }
-    let indices = accessors.len() - 1;
+    // The index accessor follows the vertex attributes' accessors (`quad_buffer`).
+    let indices = attributes.len();
+    Mesh {
+        name: name.to_string(),
+        primitives: vec![Primitive {
+            attributes,
+            indices,
+            material: 0,
+            mode: TRIANGLES,
+        }],
+    }
+}
+
+/// The material's extensions: `KHR_materials_specular` always (weight 0 for a model without
+/// a specular lobe), `KHR_materials_clearcoat` for a clear coat.
+fn material_extensions(
+    factors: &Factors,
+    specular_texture: &Option<TextureInfo>,
+    clearcoat_texture: &Option<TextureInfo>,
+) -> BTreeMap<String, serde_json::Value> {
+    let mut extensions = BTreeMap::new();
+    // Without a specular map the model has no specular lobe (lambert): weight 0.
+    let specular = match (specular_texture, factors.specular_color) {
+        (Some(info), _) => json!({
+            "specularFactor": 1.0,
+            "specularColorFactor": [1.0 / DIELECTRIC_F0, 1.0 / DIELECTRIC_F0, 1.0 / DIELECTRIC_F0],
+            "specularColorTexture": { "index": info.index },
+        }),
+        (None, Some(f0)) => json!({
+            "specularFactor": 1.0,
+            "specularColorFactor": f0.map(|v| v / DIELECTRIC_F0),
+        }),
+        (None, None) => json!({ "specularFactor": 0.0 }),
+    };
+    extensions.insert(KHR_MATERIALS_SPECULAR.to_string(), specular);
+    if let Some([weight, roughness]) = factors.clearcoat {
+        extensions.insert(
+            KHR_MATERIALS_CLEARCOAT.to_string(),
+            json!({ "clearcoatFactor": weight, "clearcoatRoughnessFactor": roughness }),
+        );
+    } else if let Some(info) = clearcoat_texture {
+        extensions.insert(
+            KHR_MATERIALS_CLEARCOAT.to_string(),
+            json!({
+                "clearcoatFactor": 1.0,
+                "clearcoatTexture": { "index": info.index },
+                "clearcoatRoughnessFactor": 1.0,
+                "clearcoatRoughnessTexture": { "index": info.index },
+            }),
+        );
+    }
+    extensions
+}
+
+/// The glTF document for `textures` whose buffer is the file `bin_uri`; `name` names the
+/// material, mesh and node.
+pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
+    let (bytes, accessors, buffer_views) = quad_buffer(textures.normal.is_some());
     let mut images = Vec::new();
     let mut texture = |file: &Option<String>| {
         file.as_ref().map(|uri| {
@@ -296,38 +351,8 @@ pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
         .map(|source| Texture { sampler: 0, source })
         .collect::<Vec<_>>();
 
-    let mut extensions = BTreeMap::new();
-    // Without a specular map the model has no specular lobe (lambert): weight 0.
     let factors = &textures.factors;
-    let specular = match (&specular_texture, factors.specular_color) {
-        (Some(info), _) => json!({
-            "specularFactor": 1.0,
-            "specularColorFactor": [1.0 / DIELECTRIC_F0, 1.0 / DIELECTRIC_F0, 1.0 / DIELECTRIC_F0],
-            "specularColorTexture": { "index": info.index },
-        }),
-        (None, Some(f0)) => json!({
-            "specularFactor": 1.0,
-            "specularColorFactor": f0.map(|v| v / DIELECTRIC_F0),
-        }),
-        (None, None) => json!({ "specularFactor": 0.0 }),
-    };
-    extensions.insert(KHR_MATERIALS_SPECULAR.to_string(), specular);
-    if let Some([weight, roughness]) = factors.clearcoat {
-        extensions.insert(
-            KHR_MATERIALS_CLEARCOAT.to_string(),
-            json!({ "clearcoatFactor": weight, "clearcoatRoughnessFactor": roughness }),
-        );
-    } else if let Some(info) = &clearcoat_texture {
-        extensions.insert(
-            KHR_MATERIALS_CLEARCOAT.to_string(),
-            json!({
-                "clearcoatFactor": 1.0,
-                "clearcoatTexture": { "index": info.index },
-                "clearcoatRoughnessFactor": 1.0,
-                "clearcoatRoughnessTexture": { "index": info.index },
-            }),
-        );
-    }
+    let extensions = material_extensions(factors, &specular_texture, &clearcoat_texture);
     let extensions_used = extensions.keys().cloned().collect();
     let material = Material {
         name: name.to_string(),
@@ -367,15 +392,7 @@ pub fn gltf_document(textures: &TextureSet, name: &str, bin_uri: &str) -> Gltf {
             name: name.to_string(),
             mesh: 0,
         }],
-        meshes: vec![Mesh {
-            name: name.to_string(),
-            primitives: vec![Primitive {
-                attributes,
-                indices,
-                material: 0,
-                mode: TRIANGLES,
-            }],
-        }],
+        meshes: vec![quad_mesh(name, textures.normal.is_some())],
         materials: vec![material],
         samplers: if gltf_textures.is_empty() {
             Vec::new()

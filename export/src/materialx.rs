@@ -59,111 +59,138 @@ pub fn element_name(text: &str) -> String {
 pub fn materialx_document(textures: &TextureSet, name: &str) -> String {
     let name = element_name(name);
     let graph = format!("NG_{name}");
-    let mut x = String::new();
-    let mut line = |s: String| {
-        x.push_str(&s);
-        x.push('\n');
-    };
-    line(r#"<?xml version="1.0" encoding="UTF-8"?>"#.to_string());
-    line(r#"<materialx version="1.38">"#.to_string());
-    line(format!(
+    let shader = format!("SR_{name}");
+    let mut x = Xml::default();
+    x.line(r#"<?xml version="1.0" encoding="UTF-8"?>"#);
+    x.line(r#"<materialx version="1.38">"#);
+    x.line(&format!(
         "  <!-- photomat material, BRDF model {} -->",
         comment_text(&textures.model)
     ));
-    for note in textures.dropped.iter() {
-        line(format!("  <!-- dropped: {} -->", comment_text(note)));
+    for note in &textures.dropped {
+        x.line(&format!("  <!-- dropped: {} -->", comment_text(note)));
     }
-    for note in textures.approximations.iter() {
-        line(format!("  <!-- approximation: {} -->", comment_text(note)));
+    for note in &textures.approximations {
+        x.line(&format!("  <!-- approximation: {} -->", comment_text(note)));
     }
-    line(format!(r#"  <nodegraph name="{graph}">"#));
-    let image = |line: &mut dyn FnMut(String), node: &str, kind: &str, file: &str, space: &str| {
-        line(format!(r#"    <image name="{node}" type="{kind}">"#));
-        line(format!(
+    let connected = node_graph(&mut x, textures, &graph);
+    surface_shader(&mut x, textures, &shader, &graph, &connected);
+    x.line(&format!(
+        r#"  <surfacematerial name="{name}" type="material">"#
+    ));
+    x.line(&format!(
+        r#"    <input name="surfaceshader" type="surfaceshader" nodename="{shader}" />"#
+    ));
+    x.line("  </surfacematerial>");
+    x.line("</materialx>");
+    x.text
+}
+
+/// A shader input wired to an output of the node graph: (input, type, graph output).
+type Connection = (&'static str, &'static str, &'static str);
+
+/// The document being written, line by line.
+#[derive(Default)]
+struct Xml {
+    text: String,
+}
+
+impl Xml {
+    fn line(&mut self, line: &str) {
+        self.text.push_str(line);
+        self.text.push('\n');
+    }
+
+    /// A periodic `image` node reading `file` in colour space `space`.
+    fn image(&mut self, node: &str, kind: &str, file: &str, space: &str) {
+        self.line(&format!(r#"    <image name="{node}" type="{kind}">"#));
+        self.line(&format!(
             r#"      <input name="file" type="filename" value="{}" colorspace="{space}" />"#,
             escape(file)
         ));
-        line(r#"      <input name="uaddressmode" type="string" value="periodic" />"#.into());
-        line(r#"      <input name="vaddressmode" type="string" value="periodic" />"#.into());
-        line("    </image>".into());
-    };
-    let extract = |line: &mut dyn FnMut(String), node: &str, from: &str, index: usize| {
-        line(format!(r#"    <extract name="{node}" type="float">"#));
-        line(format!(
+        self.line(r#"      <input name="uaddressmode" type="string" value="periodic" />"#);
+        self.line(r#"      <input name="vaddressmode" type="string" value="periodic" />"#);
+        self.line("    </image>");
+    }
+
+    /// An `extract` node taking channel `index` of the vector3 node `from`.
+    fn extract(&mut self, node: &str, from: &str, index: usize) {
+        self.line(&format!(r#"    <extract name="{node}" type="float">"#));
+        self.line(&format!(
             r#"      <input name="in" type="vector3" nodename="{from}" />"#
         ));
-        line(format!(
+        self.line(&format!(
             r#"      <input name="index" type="integer" value="{index}" />"#
         ));
-        line("    </extract>".into());
-    };
-    let output = |line: &mut dyn FnMut(String), out: &str, kind: &str, node: &str| {
-        line(format!(
+        self.line("    </extract>");
+    }
+
+    /// A node graph output named `out` of node `node`.
+    fn output(&mut self, out: &str, kind: &str, node: &str) {
+        self.line(&format!(
             r#"    <output name="{out}" type="{kind}" nodename="{node}" />"#
         ));
-    };
-    // (shader input, type, graph output) of every connected input.
-    let mut connected: Vec<(&str, &str, &str)> = Vec::new();
+    }
+}
+
+/// The node graph `graph` reading the set's textures; returns the shader inputs it feeds.
+fn node_graph(x: &mut Xml, textures: &TextureSet, graph: &str) -> Vec<Connection> {
+    let mut connected = Vec::new();
+    x.line(&format!(r#"  <nodegraph name="{graph}">"#));
     if let Some(file) = &textures.base_color {
-        image(
-            &mut line,
-            "base_color_image",
-            "color3",
-            file,
-            "srgb_texture",
-        );
-        output(&mut line, "out_diffuse", "color3", "base_color_image");
+        x.image("base_color_image", "color3", file, "srgb_texture");
+        x.output("out_diffuse", "color3", "base_color_image");
         connected.push(("diffuseColor", "color3", "out_diffuse"));
     }
     if let Some(file) = &textures.specular_color {
-        image(&mut line, "specular_image", "color3", file, "srgb_texture");
-        output(&mut line, "out_specular", "color3", "specular_image");
+        x.image("specular_image", "color3", file, "srgb_texture");
+        x.output("out_specular", "color3", "specular_image");
         connected.push(("specularColor", "color3", "out_specular"));
     }
     if let Some(file) = &textures.metallic_roughness {
-        image(
-            &mut line,
-            "metallic_roughness_image",
-            "vector3",
-            file,
-            "raw",
-        );
-        extract(&mut line, "roughness", "metallic_roughness_image", 1);
-        output(&mut line, "out_roughness", "float", "roughness");
+        x.image("metallic_roughness_image", "vector3", file, "raw");
+        x.extract("roughness", "metallic_roughness_image", 1);
+        x.output("out_roughness", "float", "roughness");
         connected.push(("roughness", "float", "out_roughness"));
     }
     if let Some(file) = &textures.normal {
-        image(&mut line, "normal_image", "vector3", file, "raw");
-        line(r#"    <normalmap name="normal_map" type="vector3">"#.into());
-        line(r#"      <input name="in" type="vector3" nodename="normal_image" />"#.into());
-        line(r#"      <input name="space" type="string" value="tangent" />"#.into());
-        line("    </normalmap>".into());
-        output(&mut line, "out_normal", "vector3", "normal_map");
+        x.image("normal_image", "vector3", file, "raw");
+        x.line(r#"    <normalmap name="normal_map" type="vector3">"#);
+        x.line(r#"      <input name="in" type="vector3" nodename="normal_image" />"#);
+        x.line(r#"      <input name="space" type="string" value="tangent" />"#);
+        x.line("    </normalmap>");
+        x.output("out_normal", "vector3", "normal_map");
         connected.push(("normal", "vector3", "out_normal"));
     }
     if let Some(file) = &textures.clearcoat {
-        image(&mut line, "clearcoat_image", "vector3", file, "raw");
-        extract(&mut line, "clearcoat", "clearcoat_image", 0);
-        extract(&mut line, "clearcoat_roughness", "clearcoat_image", 1);
-        output(&mut line, "out_clearcoat", "float", "clearcoat");
-        output(
-            &mut line,
-            "out_clearcoat_roughness",
-            "float",
-            "clearcoat_roughness",
-        );
+        x.image("clearcoat_image", "vector3", file, "raw");
+        x.extract("clearcoat", "clearcoat_image", 0);
+        x.extract("clearcoat_roughness", "clearcoat_image", 1);
+        x.output("out_clearcoat", "float", "clearcoat");
+        x.output("out_clearcoat_roughness", "float", "clearcoat_roughness");
         connected.push(("clearcoat", "float", "out_clearcoat"));
         connected.push(("clearcoatRoughness", "float", "out_clearcoat_roughness"));
     }
-    line("  </nodegraph>".into());
-    let shader = format!("SR_{name}");
-    line(format!(
+    x.line("  </nodegraph>");
+    connected
+}
+
+/// The `UsdPreviewSurface` shader `shader` in the specular workflow: the graph's outputs
+/// `connected`, the set's constant maps as values, and defaults for maps the model lacks.
+fn surface_shader(
+    x: &mut Xml,
+    textures: &TextureSet,
+    shader: &str,
+    graph: &str,
+    connected: &[Connection],
+) {
+    x.line(&format!(
         r#"  <UsdPreviewSurface name="{shader}" type="surfaceshader">"#
     ));
-    line(r#"    <input name="useSpecularWorkflow" type="integer" value="1" />"#.into());
-    line(r#"    <input name="metallic" type="float" value="0" />"#.into());
-    for (input, kind, out) in &connected {
-        line(format!(
+    x.line(r#"    <input name="useSpecularWorkflow" type="integer" value="1" />"#);
+    x.line(r#"    <input name="metallic" type="float" value="0" />"#);
+    for (input, kind, out) in connected {
+        x.line(&format!(
             r#"    <input name="{input}" type="{kind}" nodegraph="{graph}" output="{out}" />"#
         ));
     }
@@ -185,7 +212,7 @@ pub fn materialx_document(textures: &TextureSet, name: &str) -> String {
         constants.push(("clearcoatRoughness", "float", roughness.to_string()));
     }
     for (input, kind, value) in &constants {
-        line(format!(
+        x.line(&format!(
             r#"    <input name="{input}" type="{kind}" value="{value}" />"#
         ));
     }
@@ -195,25 +222,18 @@ pub fn materialx_document(textures: &TextureSet, name: &str) -> String {
     };
     // Defaults for maps the model lacks: no diffuse → black base; no specular → no lobe; no
     // roughness → fully rough.
-    if !has("diffuseColor") {
-        line(r#"    <input name="diffuseColor" type="color3" value="0, 0, 0" />"#.into());
+    for (input, kind, value) in [
+        ("diffuseColor", "color3", "0, 0, 0"),
+        ("specularColor", "color3", "0, 0, 0"),
+        ("roughness", "float", "1"),
+    ] {
+        if !has(input) {
+            x.line(&format!(
+                r#"    <input name="{input}" type="{kind}" value="{value}" />"#
+            ));
+        }
     }
-    if !has("specularColor") {
-        line(r#"    <input name="specularColor" type="color3" value="0, 0, 0" />"#.into());
-    }
-    if !has("roughness") {
-        line(r#"    <input name="roughness" type="float" value="1" />"#.into());
-    }
-    line("  </UsdPreviewSurface>".into());
-    line(format!(
-        r#"  <surfacematerial name="{name}" type="material">"#
-    ));
-    line(format!(
-        r#"    <input name="surfaceshader" type="surfaceshader" nodename="{shader}" />"#
-    ));
-    line("  </surfacematerial>".into());
-    line("</materialx>".into());
-    x
+    x.line("  </UsdPreviewSurface>");
 }
 
 /// Write `dir/<stem>.mtlx` for `textures`, whose files lie in `dir`. Returns its path.

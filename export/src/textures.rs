@@ -164,21 +164,14 @@ pub fn write_textures(
              {height}×{width} maps"
         )));
     }
-    let shading = brdf.shading_maps(maps)?;
-    let image = |name: &str| -> Result<Option<PlanarImage>> {
-        match shading.contains(name) {
-            true => Ok(Some(PlanarImage::from_tensor(shading.get(name)?)?)),
-            false => Ok(None),
-        }
-    };
     std::fs::create_dir_all(dir)
         .map_err(|e| Error::file(dir, format!("cannot create the texture folder: {e}")))?;
-    let write = |name: &str, image: &PlanarImage| -> Result<String> {
-        write_png(&dir.join(name), image, PngBits::Eight)?;
-        Ok(name.to_string())
+    let shading = Shading {
+        maps: brdf.shading_maps(maps)?,
+        dir,
     };
     let mut set = TextureSet {
-        model: model.clone(),
+        model,
         resolution: height,
         base_color: None,
         metallic_roughness: None,
@@ -189,41 +182,103 @@ pub fn write_textures(
         dropped: Vec::new(),
         approximations: Vec::new(),
     };
-    let constant = |name: &str| -> Result<Option<Vec<f32>>> {
-        match shading.contains(name) {
-            true => constant_value(shading.get(name)?),
+    base_layer(&shading, &mut set)?;
+    clear_coat(&shading, &mut set)?;
+    if set.specular_color.is_some()
+        || set.clearcoat.is_some()
+        || set.factors.specular_color.is_some()
+        || set.factors.clearcoat.is_some()
+    {
+        set.approximations.push(
+            "renderers layer the specular over the diffuse base and darken the base by the \
+             layer's Fresnel reflectance; photomat adds the lobes"
+                .to_string(),
+        );
+    }
+    for (name, _) in shading.maps.iter() {
+        if !MAPPED.contains(&name) {
+            set.dropped
+                .push(format!("{name}: no glTF / UsdPreviewSurface equivalent"));
+        }
+    }
+    Ok(set)
+}
+
+/// A material's shading maps and the folder their textures go to.
+struct Shading<'a> {
+    maps: MaterialMaps,
+    dir: &'a Path,
+}
+
+impl Shading<'_> {
+    /// Map `name` as an image, if the model has it.
+    fn image(&self, name: &str) -> Result<Option<PlanarImage>> {
+        match self.maps.contains(name) {
+            true => Ok(Some(PlanarImage::from_tensor(self.maps.get(name)?)?)),
             false => Ok(None),
         }
-    };
-    let rgb = |v: Vec<f32>| [v[0], v[1], v[2]];
-    if let Some(value) = constant("diffuse")? {
-        set.factors.base_color = Some(rgb(value));
-    } else if let Some(diffuse) = image("diffuse")? {
-        set.base_color = Some(write(files::BASE_COLOR, &diffuse.map(srgb_encode))?);
     }
-    if let Some(value) = constant("roughness")? {
+
+    /// Map `name`'s value if the model has it and every texel is exactly that value.
+    fn constant(&self, name: &str) -> Result<Option<Vec<f32>>> {
+        match self.maps.contains(name) {
+            true => constant_value(self.maps.get(name)?),
+            false => Ok(None),
+        }
+    }
+
+    /// Writes `image` as the 8-bit PNG `file`; returns the file name.
+    fn write(&self, file: &str, image: &PlanarImage) -> Result<String> {
+        write_png(&self.dir.join(file), image, PngBits::Eight)?;
+        Ok(file.to_string())
+    }
+}
+
+/// Base colour, roughness, specular colour and normal: a texture each, or a factor for a
+/// constant map (no texture for a flat normal).
+fn base_layer(shading: &Shading, set: &mut TextureSet) -> Result<()> {
+    let rgb = |v: Vec<f32>| [v[0], v[1], v[2]];
+    if let Some(value) = shading.constant("diffuse")? {
+        set.factors.base_color = Some(rgb(value));
+    } else if let Some(diffuse) = shading.image("diffuse")? {
+        set.base_color = Some(shading.write(files::BASE_COLOR, &diffuse.map(srgb_encode))?);
+    }
+    if let Some(value) = shading.constant("roughness")? {
         set.factors.roughness = Some(value[0]);
-    } else if let Some(roughness) = image("roughness")? {
+    } else if let Some(roughness) = shading.image("roughness")? {
         let plane = roughness.texels();
         let r = &roughness.data[..plane];
         let packed = [vec![1.0; plane], r.to_vec(), vec![0.0; plane]].concat();
-        set.metallic_roughness = Some(write(
+        let (height, width) = (roughness.height, roughness.width);
+        set.metallic_roughness = Some(shading.write(
             files::METALLIC_ROUGHNESS,
             &PlanarImage::new(3, height, width, packed)?,
         )?);
     }
-    if let Some(value) = constant("specular")? {
+    if let Some(value) = shading.constant("specular")? {
         set.factors.specular_color = Some(rgb(value));
-    } else if let Some(specular) = image("specular")? {
-        set.specular_color = Some(write(files::SPECULAR_COLOR, &specular.map(srgb_encode))?);
+    } else if let Some(specular) = shading.image("specular")? {
+        set.specular_color =
+            Some(shading.write(files::SPECULAR_COLOR, &specular.map(srgb_encode))?);
     }
     // A normal map of +z everywhere is the flat default: no texture.
-    let flat = constant("normal")?.is_some_and(|n| n[0] == 0.0 && n[1] == 0.0 && n[2] > 0.0);
-    if let Some(normal) = image("normal")?.filter(|_| !flat) {
-        set.normal = Some(write(files::NORMAL, &encode_normal(&normal))?);
+    let flat = shading
+        .constant("normal")?
+        .is_some_and(|n| n[0] == 0.0 && n[1] == 0.0 && n[2] > 0.0);
+    if let Some(normal) = shading.image("normal")?.filter(|_| !flat) {
+        set.normal = Some(shading.write(files::NORMAL, &encode_normal(&normal))?);
     }
-    let coat = (constant("specular2")?, constant("roughness2")?);
-    match (image("specular2")?, image("roughness2")?) {
+    Ok(())
+}
+
+/// `specular2` + `roughness2` as a clear coat (texture or factors, with the approximation
+/// note); one of them alone is dropped.
+fn clear_coat(shading: &Shading, set: &mut TextureSet) -> Result<()> {
+    let coat = (
+        shading.constant("specular2")?,
+        shading.constant("roughness2")?,
+    );
+    match (shading.image("specular2")?, shading.image("roughness2")?) {
         _ if let (Some(specular2), Some(roughness2)) = &coat => {
             let texel = PlanarImage::new(3, 1, 1, specular2.clone())?;
             let (weight, clipped) = clearcoat_weight(&texel);
@@ -235,7 +290,8 @@ pub fn write_textures(
             let plane = specular2.texels();
             let (weight, clipped) = clearcoat_weight(&specular2);
             let packed = [weight, roughness2.data[..plane].to_vec(), vec![0.0; plane]].concat();
-            set.clearcoat = Some(write(
+            let (height, width) = (specular2.height, specular2.width);
+            set.clearcoat = Some(shading.write(
                 files::CLEARCOAT,
                 &PlanarImage::new(3, height, width, packed)?,
             )?);
@@ -255,24 +311,7 @@ pub fn write_textures(
             }
         }
     }
-    if set.specular_color.is_some()
-        || set.clearcoat.is_some()
-        || set.factors.specular_color.is_some()
-        || set.factors.clearcoat.is_some()
-    {
-        set.approximations.push(
-            "renderers layer the specular over the diffuse base and darken the base by the \
-             layer's Fresnel reflectance; photomat adds the lobes"
-                .to_string(),
-        );
-    }
-    for (name, _) in shading.iter() {
-        if !MAPPED.contains(&name) {
-            set.dropped
-                .push(format!("{name}: no glTF / UsdPreviewSurface equivalent"));
-        }
-    }
-    Ok(set)
+    Ok(())
 }
 
 /// The clear-coat weight per texel of a `specular2` image, `min(lum(F0₂)/0.04, 1)`, and how

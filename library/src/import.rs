@@ -37,6 +37,7 @@ pub const LIBRARY: ResultKind = ResultKind {
     what: "a material library",
     command: "photomat library import",
     entries: &[INDEX_FILE, MATERIALS_DIR, SHEET_FILE],
+    kept: &[],
 };
 
 /// How an import runs.
@@ -109,47 +110,25 @@ pub fn import(
     for (index, source) in sources.iter().enumerate() {
         let tree = SourceTree::open(source)?;
         let package = PackageSource::identify(source, &tree)?;
-        let sets = find_sets(&tree);
-        progress(ImportEvent::Source {
-            package: package.package.name.clone(),
-            sets: sets.len(),
-        });
-        let results: Vec<(TextureSet, Result<Candidate, Rejection>, Option<String>)> = sets
-            .into_par_iter()
-            .map(|set| {
-                if stop.load(Ordering::SeqCst) {
-                    return (set, Err(Rejection::Unreadable), None);
-                }
-                let outcome = import_set(&tree, &package, &set, index, &staging, options);
-                progress(ImportEvent::Set);
-                let (result, problem) = match outcome {
-                    Ok(candidate) => (Ok(candidate), None),
-                    Err(SetFailure::Rejected(r)) => (Err(r), None),
-                    Err(SetFailure::Unreadable(message)) => {
-                        progress(ImportEvent::Unreadable(message.clone()));
-                        (Err(Rejection::Unreadable), Some(message))
-                    }
-                };
-                (set, result, problem)
-            })
-            .collect();
-        if stop.load(Ordering::SeqCst) {
+        let Some(imported) =
+            import_source(&tree, &package, index, &staging, options, stop, progress)
+        else {
             return Ok(ImportReport {
                 library: out.to_path_buf(),
                 index: empty_index(options),
                 unreadable,
                 interrupted: true,
             });
-        }
+        };
         let mut entry = PackageEntry {
             package: package.package.clone(),
             source: photomat_core::paths::absolute(source),
-            sets: results.len(),
+            sets: imported.len(),
             materials: BTreeMap::new(),
             rejected: BTreeMap::new(),
             licences: BTreeMap::new(),
         };
-        for (_, result, problem) in results {
+        for (result, problem) in imported {
             unreadable.extend(problem);
             match result {
                 Ok(candidate) => candidates.push(candidate),
@@ -158,40 +137,7 @@ pub fn import(
         }
         packages.push(entry);
     }
-    candidates.sort_by(|a, b| a.id.cmp(&b.id));
-    let signatures: Vec<Signature> = candidates.iter().map(|c| c.signature.clone()).collect();
-    let cluster_of = clusters(&signatures);
-    let mut first_of_cluster: BTreeMap<usize, String> = BTreeMap::new();
-    let mut materials = Vec::new();
-    for (candidate, cluster) in candidates.into_iter().zip(cluster_of) {
-        let packages_entry = &mut packages[candidate.source];
-        if first_of_cluster.contains_key(&cluster) {
-            let dir = staging.join(MATERIALS_DIR).join(&candidate.id);
-            std::fs::remove_dir_all(&dir)
-                .with_context(|| format!("cannot remove the duplicate {}", dir.display()))?;
-            *packages_entry
-                .rejected
-                .entry(Rejection::Duplicate)
-                .or_default() += 1;
-            continue;
-        }
-        first_of_cluster.insert(cluster, candidate.id.clone());
-        let split = split_of(&candidate.id, options.seed, options.shares);
-        *packages_entry.materials.entry(split).or_default() += 1;
-        for licence in &candidate.licences {
-            *packages_entry.licences.entry(licence.clone()).or_default() += 1;
-        }
-        materials.push(IndexEntry {
-            cluster: candidate.id.clone(),
-            id: candidate.id,
-            split,
-            package: packages_entry.package.name.clone(),
-            base: candidate.set.base,
-            licences: candidate.licences,
-            side: candidate.side,
-            height_scale: candidate.height_scale,
-        });
-    }
+    let materials = deduplicate_and_split(candidates, &mut packages, &staging, options)?;
     let index = LibraryIndex {
         materials,
         packages,
@@ -208,6 +154,89 @@ pub fn import(
         unreadable,
         interrupted: false,
     })
+}
+
+/// One set's outcome: the candidate or why not, and the message of an unreadable file.
+type SetOutcome = (Result<Candidate, Rejection>, Option<String>);
+
+/// Every texture set of source `index` converted into `staging` in parallel; `None` when the
+/// stop flag was set meanwhile.
+fn import_source(
+    tree: &SourceTree,
+    package: &PackageSource,
+    index: usize,
+    staging: &Path,
+    options: &ImportOptions,
+    stop: &AtomicBool,
+    progress: &(dyn Fn(ImportEvent) + Sync),
+) -> Option<Vec<SetOutcome>> {
+    let sets = find_sets(tree);
+    progress(ImportEvent::Source {
+        package: package.package.name.clone(),
+        sets: sets.len(),
+    });
+    let results: Vec<SetOutcome> = sets
+        .into_par_iter()
+        .map(|set| {
+            if stop.load(Ordering::SeqCst) {
+                return (Err(Rejection::Unreadable), None);
+            }
+            let outcome = import_set(tree, package, &set, index, staging, options);
+            progress(ImportEvent::Set);
+            match outcome {
+                Ok(candidate) => (Ok(candidate), None),
+                Err(SetFailure::Rejected(r)) => (Err(r), None),
+                Err(SetFailure::Unreadable(message)) => {
+                    progress(ImportEvent::Unreadable(message.clone()));
+                    (Err(Rejection::Unreadable), Some(message))
+                }
+            }
+        })
+        .collect();
+    (!stop.load(Ordering::SeqCst)).then_some(results)
+}
+
+/// The index entries of `candidates` (sorted by id): the first of each near-duplicate cluster
+/// kept and given its split, the others removed from `staging` and counted as duplicates in
+/// their package's entry.
+fn deduplicate_and_split(
+    mut candidates: Vec<Candidate>,
+    packages: &mut [PackageEntry],
+    staging: &Path,
+    options: &ImportOptions,
+) -> anyhow::Result<Vec<IndexEntry>> {
+    candidates.sort_by(|a, b| a.id.cmp(&b.id));
+    let signatures: Vec<Signature> = candidates.iter().map(|c| c.signature.clone()).collect();
+    let cluster_of = clusters(&signatures);
+    let mut seen_clusters = std::collections::BTreeSet::new();
+    let mut materials = Vec::new();
+    for (candidate, cluster) in candidates.into_iter().zip(cluster_of) {
+        let package = &mut packages[candidate.source];
+        if !seen_clusters.insert(cluster) {
+            let dir = staging.join(MATERIALS_DIR).join(&candidate.id);
+            std::fs::remove_dir_all(&dir)
+                .with_context(|| format!("cannot remove the duplicate {}", dir.display()))?;
+            *package.rejected.entry(Rejection::Duplicate).or_default() += 1;
+            continue;
+        }
+        let split = split_of(&candidate.id, options.seed, options.shares);
+        *package.materials.entry(split).or_default() += 1;
+        for licence in &candidate.licences {
+            *package.licences.entry(licence.clone()).or_default() += 1;
+        }
+        materials.push(IndexEntry {
+            // The kept material is its cluster's first, and names it.
+            cluster: candidate.id.clone(),
+            id: candidate.id,
+            split,
+            package: package.package.name.clone(),
+            base: candidate.set.base,
+            licences: candidate.licences,
+            side: candidate.side,
+            height_scale: candidate.height_scale,
+        });
+    }
+    Ok(materials)
 }
 
 fn empty_index(options: &ImportOptions) -> LibraryIndex {

@@ -9,7 +9,8 @@
 
 use candle_core::{Device, Result, Tensor};
 use photomat_core::Highlight;
-use photomat_core::image_io::{PlanarImage, contact_sheet};
+use photomat_core::image_io::PlanarImage;
+use photomat_core::sheet::contact_sheet;
 
 use super::data::{FlashPlacement, TrainingData, omega_for_placements};
 use super::streams::{Stream, stream_seed, stream_seeds};

@@ -46,7 +46,7 @@ use photomat_train::{
 };
 
 use super::config::TrainConfig;
-use super::data::{TrainingData, omega_for_placements};
+use super::data::{RealBatch, TrainingData, omega_for_placements};
 use super::ema::{Ema, ema_beta};
 use super::loss::{discriminator_loss, generator_loss, r1_loss};
 use super::path_length::{PL_BATCH_SHRINK, PathLengthMean, path_lengths, pl_loss, pl_noise};
@@ -432,9 +432,7 @@ impl Trainer {
     pub fn step(&mut self, data: &dyn TrainingData) -> Result<StepStats> {
         let step = self.step;
         let (seed, b) = (self.config.seed, self.config.batch);
-
         let mut seconds = PhaseSeconds::default();
-        let mut pl = None;
         let mut clock = Instant::now();
         let mut lap = || {
             let t = clock.elapsed().as_secs_f64();
@@ -442,10 +440,57 @@ impl Trainer {
             t
         };
 
-        // 1. G and M, judged by D with its weights as constants: this phase steps G and M
-        // only, so D's weight gradients would be thrown away (StyleGAN2-ADA freezes D here
-        // too); D's convolutions then compute input gradients alone.
-        let fakes = self.generate(Phase::G, step, b, None, data)?;
+        let loss_g = self.generator_phase(step, data)?;
+        // The running mean is a variable: its clone shares it.
+        let path_length = match self.pl_mean.clone() {
+            Some(mean) if step.is_multiple_of(self.config.g_reg_interval as u64) => {
+                Some(self.path_length_phase(step, data, &mean)?)
+            }
+            _ => None,
+        };
+        seconds.g = lap();
+        let reals = data.reals(b, stream_seed(seed, step, Stream::Crops, 0), &self.device)?;
+        seconds.data = lap();
+        let d = self.discriminator_phase(step, data, &reals)?;
+        seconds.d = lap();
+        let r1 =
+            if step.is_multiple_of(self.config.r1_interval as u64) && self.config.r1_gamma > 0.0 {
+                Some(self.r1_phase(&reals)?)
+            } else {
+                None
+            };
+        seconds.r1 = lap();
+        // Phase 4, G_ema.
+        let beta = ema_beta(
+            b,
+            self.config.ema_kimg,
+            self.config.ema_rampup,
+            self.images_seen(),
+        );
+        self.ema.update(beta)?;
+        seconds.ema = lap();
+
+        let skipped = self.guard.end_step(step + 1)?;
+        self.step += 1;
+        Ok(StepStats {
+            step,
+            loss_g,
+            loss_d: d.loss,
+            real_logit: d.real_logit,
+            fake_logit: d.fake_logit,
+            mismatch_logit: d.mismatch_logit,
+            r1,
+            path_length,
+            skipped,
+            seconds,
+        })
+    }
+
+    /// Phase 1, G and M, judged by D with its weights as constants: this phase steps G and M only,
+    /// so D's weight gradients would be thrown away (StyleGAN2-ADA freezes D here too); D's
+    /// convolutions then compute input gradients alone. Returns G's loss.
+    fn generator_phase(&mut self, step: u64, data: &dyn TrainingData) -> Result<f64> {
+        let fakes = self.generate(Phase::G, step, self.config.batch, None, data)?;
         let logits = self
             .frozen_discriminator()?
             .forward(&fakes.images, &fakes.omega)?;
@@ -457,52 +502,59 @@ impl Trainer {
             self.opt_g.step(&grads)?;
             self.model.generator().mapping().update_w_avg(&fakes.w)?;
         }
-        drop(grads);
+        Ok(loss_g)
+    }
 
-        // 1b. Lazy path-length regularisation of G (optional).
-        if let Some(mean) = &self.pl_mean
-            && step.is_multiple_of(self.config.g_reg_interval as u64)
-        {
-            let pb = (b / PL_BATCH_SHRINK).max(1);
-            // candle keeps gradients only for variables: the lengths are taken with respect
-            // to a zero variable added to ws (the same derivative), so that the penalty still
-            // reaches the mapping network through ws, as in the reference.
-            let cfg = &self.config.generator;
-            let offset = Var::zeros((pb, cfg.num_ws(), cfg.latent_dim), DType::F32, &self.device)?;
-            let fakes =
-                self.generate(Phase::PathLength, step, pb, Some(offset.as_tensor()), data)?;
-            let noise = pl_noise(
-                fakes.images.dims4()?,
-                stream_seed(seed, step, Stream::PlImageNoise, 0),
-                &self.device,
-            )?;
-            let lengths = path_lengths(&fakes.images, offset.as_tensor(), &noise)?;
-            let batch_mean = scalar(&lengths.mean_all()?)?;
-            let target = if batch_mean.is_finite() {
-                mean.update(batch_mean)?
-            } else {
-                mean.value()?
-            };
-            let loss = pl_loss(
-                &lengths,
-                target,
-                self.config.pl_weight,
-                self.config.g_reg_interval,
-            )?;
-            let value = scalar(&loss)?;
-            let grads = loss.backward()?;
-            let finite = gradients_finite(&grads, self.opt_g.vars().map(|(_, v)| v))?;
-            if self.guard.allow("PL", value, finite) {
-                self.opt_g.step(&grads)?;
-            }
-            pl = Some(batch_mean);
+    /// Phase 1b, lazy path-length regularisation of G (a run with a path-length weight). Returns
+    /// the batch's mean path length.
+    fn path_length_phase(
+        &mut self,
+        step: u64,
+        data: &dyn TrainingData,
+        mean: &PathLengthMean,
+    ) -> Result<f64> {
+        let pb = (self.config.batch / PL_BATCH_SHRINK).max(1);
+        // candle keeps gradients only for variables: the lengths are taken with respect to a
+        // zero variable added to ws (the same derivative), so that the penalty still reaches
+        // the mapping network through ws, as in the reference.
+        let cfg = &self.config.generator;
+        let offset = Var::zeros((pb, cfg.num_ws(), cfg.latent_dim), DType::F32, &self.device)?;
+        let fakes = self.generate(Phase::PathLength, step, pb, Some(offset.as_tensor()), data)?;
+        let noise = pl_noise(
+            fakes.images.dims4()?,
+            stream_seed(self.config.seed, step, Stream::PlImageNoise, 0),
+            &self.device,
+        )?;
+        let lengths = path_lengths(&fakes.images, offset.as_tensor(), &noise)?;
+        let batch_mean = scalar(&lengths.mean_all()?)?;
+        let target = if batch_mean.is_finite() {
+            mean.update(batch_mean)?
+        } else {
+            mean.value()?
+        };
+        let loss = pl_loss(
+            &lengths,
+            target,
+            self.config.pl_weight,
+            self.config.g_reg_interval,
+        )?;
+        let value = scalar(&loss)?;
+        let grads = loss.backward()?;
+        let finite = gradients_finite(&grads, self.opt_g.vars().map(|(_, v)| v))?;
+        if self.guard.allow("PL", value, finite) {
+            self.opt_g.step(&grads)?;
         }
-        seconds.g = lap();
+        Ok(batch_mean)
+    }
 
-        // 2. D on fakes and reals.
-        let reals = data.reals(b, stream_seed(seed, step, Stream::Crops, 0), &self.device)?;
-        seconds.data = lap();
-        let fakes = self.generate(Phase::D, step, b, None, data)?;
+    /// Phase 2, D on fresh fakes and on `reals`, with the light-mismatch term when weighted.
+    fn discriminator_phase(
+        &mut self,
+        step: u64,
+        data: &dyn TrainingData,
+        reals: &RealBatch,
+    ) -> Result<DiscriminatorPhase> {
+        let fakes = self.generate(Phase::D, step, self.config.batch, None, data)?;
         let fake_logits = self.d.forward(&fakes.images.detach(), &fakes.omega)?;
         let real_logits = self.d.forward(&reals.images, &reals.omega)?;
         // The fakes' lights were drawn independently of the reals': for the reals they are
@@ -524,53 +576,37 @@ impl Trainer {
         if self.guard.allow("D", loss_d, finite) {
             self.opt_d.step(&grads)?;
         }
-        drop(grads);
-        seconds.d = lap();
-
-        // 3. Lazy R1 on the same reals.
-        let r1 =
-            if step.is_multiple_of(self.config.r1_interval as u64) && self.config.r1_gamma > 0.0 {
-                let penalty = self.d.r1_penalty(&reals.images, &reals.omega)?;
-                let loss = r1_loss(&penalty, self.config.r1_gamma, self.config.r1_interval)?;
-                let value = scalar(&loss)?;
-                let grads = loss.backward()?;
-                let finite = gradients_finite(&grads, self.opt_d.vars().map(|(_, v)| v))?;
-                if self.guard.allow("R1", value, finite) {
-                    self.opt_d.step(&grads)?;
-                }
-                Some(scalar(&penalty.mean_all()?)?)
-            } else {
-                None
-            };
-        seconds.r1 = lap();
-
-        // 4. G_ema.
-        let beta = ema_beta(
-            b,
-            self.config.ema_kimg,
-            self.config.ema_rampup,
-            self.images_seen(),
-        );
-        self.ema.update(beta)?;
-        seconds.ema = lap();
-
-        let skipped = self.guard.end_step(step + 1)?;
-        self.step += 1;
-        Ok(StepStats {
-            step,
-            loss_g,
-            loss_d,
+        Ok(DiscriminatorPhase {
+            loss: loss_d,
             real_logit: scalar(&real_logits.mean_all()?)?,
             fake_logit: scalar(&fake_logits.mean_all()?)?,
             mismatch_logit: mismatch_logits
                 .map(|l| scalar(&l.mean_all()?))
                 .transpose()?,
-            r1,
-            path_length: pl,
-            skipped,
-            seconds,
         })
     }
+
+    /// Phase 3, lazy R1 on the same reals. Returns the mean penalty.
+    fn r1_phase(&mut self, reals: &RealBatch) -> Result<f64> {
+        let penalty = self.d.r1_penalty(&reals.images, &reals.omega)?;
+        let loss = r1_loss(&penalty, self.config.r1_gamma, self.config.r1_interval)?;
+        let value = scalar(&loss)?;
+        let grads = loss.backward()?;
+        let finite = gradients_finite(&grads, self.opt_d.vars().map(|(_, v)| v))?;
+        if self.guard.allow("R1", value, finite) {
+            self.opt_d.step(&grads)?;
+        }
+        scalar(&penalty.mean_all()?)
+    }
+}
+
+/// What D's phase of a step measured.
+struct DiscriminatorPhase {
+    loss: f64,
+    /// Mean logits on the reals, the fakes and the reals under the fakes' lights.
+    real_logit: f64,
+    fake_logit: f64,
+    mismatch_logit: Option<f64>,
 }
 
 /// How the error of a diverged run ends (after the step and the non-finite losses).
