@@ -187,7 +187,7 @@ pub fn per_texel_mlp_rows_reference(
             .matmul(&w.t()?)?
             .broadcast_add(&l.bias.affine(l.bias_gain, 0.0)?)?;
         if i + 1 < layers.len() {
-            x = crate::leaky_relu_gain(&x, act.slope, act.gain)?;
+            x = crate::activation::leaky_relu_gain(&x, act.slope, act.gain)?;
         }
     }
     Ok(x)

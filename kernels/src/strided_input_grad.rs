@@ -1,4 +1,4 @@
-//! Input gradients of strided convolutions on the register tiles of [`crate::direct_conv`], by
+//! Input gradients of strided convolutions on the register tiles of [`crate::conv_tiles`], by
 //! the polyphase decomposition of a transposed convolution.
 //!
 //! Along one axis, a convolution of stride `s`, kernel `k` and padding `p` reads input position
@@ -15,7 +15,7 @@
 //! `s²` phases of `dx` are `s²` such correlations, together `kh·kw` taps per input channel
 //! (the FLOP of the forward, where zero-insertion into `dy` would do `s²` times as many and
 //! im2col + `gemm` + col2im copies every product through a `kh·kw`-row column matrix). Each
-//! phase runs on `direct_conv::run_tiles` over one padded copy of `dy` that every phase
+//! phase runs on `conv_tiles::run_tiles` over one padded copy of `dy` that every phase
 //! reads at its own offset (`dy` positions outside the output wrap, for circular padding, or
 //! are zeros), and its results are interleaved into `dx`. This is the decomposition of
 //! transposed convolutions into stride-1 ones used by deconvolution layers (Shi et al., "Is
@@ -31,8 +31,8 @@ use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
 use crate::avx512::LANES;
-use crate::conv::Geometry;
-use crate::direct_conv::{self, MIN_BAND_ROWS, PAD_BAND_BYTES, TileGrid};
+use crate::conv_geometry::Geometry;
+use crate::conv_tiles::{self, MIN_BAND_ROWS, PAD_BAND_BYTES, TileGrid};
 
 /// Bytes of the phases' results one task holds before merging them into `dx`: half of this
 /// VM's 2 MiB L2, so that the merge reads them from cache, not memory.
@@ -163,13 +163,13 @@ pub(crate) fn input_grad(g: &Geometry, dy: &[f32], w: &[f32], dx: &mut [f32], th
     run_in_bands(g, (&rows, &cols), dy, w, dx, band.clamp(1, nq));
 }
 
-/// One phase's sub-kernel, flipped, packed in tile order for [`direct_conv::run_tiles`]:
+/// One phase's sub-kernel, flipped, packed in tile order for [`conv_tiles::run_tiles`]:
 /// `OC_BLOCK` input channels of the forward (the phase's outputs), then rows
 /// `(o·T_y + t')·T_x + u'` holding `W[o, c, first_y + s·(T_y − 1 − t'), first_x + s·(T_x − 1 − u')]`.
 fn pack_phase(g: &Geometry, w: &[f32], ry: AxisPhase, rx: AxisPhase) -> Vec<f32> {
     let s = g.stride;
     let taps = ry.taps * rx.taps;
-    direct_conv::pack_weights(g.ci, g.co * taps, |c, dst| {
+    conv_tiles::pack_weights(g.ci, g.co * taps, |c, dst| {
         let mut dst = dst.iter_mut();
         for o in 0..g.co {
             let kernel = &w[(o * g.ci + c) * g.kh * g.kw..][..g.kh * g.kw];
@@ -270,7 +270,7 @@ fn run_in_bands(
                 // by this task; `dyp` holds every padded row and column the phase reads
                 // (`AxisPlan`), and a dropped texel reads at most `row − len_x` floats past
                 // its row, inside the next padded row.
-                unsafe { direct_conv::run_tiles(&grid, dyp, packed, out_p) };
+                unsafe { conv_tiles::run_tiles(&grid, dyp, packed, out_p) };
             }
             // dx rows s·q0 .. s·q1 of image i, each interleaving the lines of its row phase's
             // column phases: row by row, so that every dx row is written once, whole.
@@ -355,7 +355,8 @@ mod tests {
     use candle_core::{DType, Device, Result, Tensor};
 
     use super::*;
-    use crate::conv::{Conv2dSpec, apply_input_grad};
+    use crate::conv::apply_input_grad;
+    use crate::conv_geometry::{Conv2dSpec, PaddingMode};
     use crate::testing::max_abs_diff;
     use photomat_core::rng::pseudo_random;
 
@@ -408,7 +409,7 @@ mod tests {
             for spec in [Conv2dSpec::zeros(2, pad), Conv2dSpec::circular(2, pad)] {
                 let g = Geometry::new((2, 3, h, 40), (5, 3, k, k), spec)?;
                 let Some(plans) = plans(&g) else {
-                    assert!(spec.mode == crate::conv::PaddingMode::Circular && h == 33);
+                    assert!(spec.mode == PaddingMode::Circular && h == 33);
                     continue;
                 };
                 let dy = pseudo_random(g.y_shape(), 21, DType::F32, &dev)?;
