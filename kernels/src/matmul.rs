@@ -114,3 +114,14 @@ pub(crate) unsafe fn matmul_raw<T: WithDType>(
         )
     }
 }
+
+/// `dst (m × n, row-major) = [dst +] lhs (m × k) · rhs (k × n)` on the calling thread.
+pub(crate) fn matmul_rows<T: WithDType>(
+    dims: (usize, usize, usize),
+    dst: &mut [T],
+    accumulate: bool,
+    lhs: Mat<'_, T>,
+    rhs: Mat<'_, T>,
+) {
+    matmul(dims, dst, dims.1, accumulate, lhs, rhs, 1);
+}
