@@ -30,6 +30,7 @@ use candle_core::{CpuStorage, CustomOp2, DType, Layout, Result, Shape, Tensor, W
 use crate::alloc::output_buffer;
 use crate::conv_geometry::Geometry;
 pub use crate::conv_geometry::{Conv2dSpec, PaddingMode};
+use crate::simd::SimdFamily;
 use crate::storage::{contiguous, expect_shape};
 use crate::{direct_conv, direct_weight_grad, im2col, strided_input_grad};
 
@@ -81,35 +82,45 @@ pub(crate) fn fast_path(a: &Tensor, b: &Tensor) -> Result<bool> {
     Ok(a.device().is_cpu() && b.device().is_cpu() && matches!(a.dtype(), DType::F32 | DType::F64))
 }
 
-/// Whether the direct kernels may run: yes unless the environment
-/// variable `PHOTOMAT_NO_DIRECT_CONV` is set, which sends every convolution to im2col + `gemm`
-/// (same-binary A/B measurements, `docs/benchmarks.md`). Read once per process.
-fn direct_conv_enabled() -> bool {
+/// The family of the direct kernels for a call on this thread: [`SimdFamily::active`]
+/// unless the environment variable `PHOTOMAT_NO_DIRECT_CONV` is set, which sends every
+/// convolution to im2col + `gemm` (same-binary A/B measurements, `docs/benchmarks.md`; read
+/// once per process).
+fn direct_family() -> SimdFamily {
     static ENABLED: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
-    *ENABLED.get_or_init(|| std::env::var_os("PHOTOMAT_NO_DIRECT_CONV").is_none())
+    if *ENABLED.get_or_init(|| std::env::var_os("PHOTOMAT_NO_DIRECT_CONV").is_none()) {
+        SimdFamily::active()
+    } else {
+        SimdFamily::Scalar
+    }
 }
 
-/// The three operands as f32 slices when `T` is f32 and the direct kernels are enabled.
+/// The three operands as f32 slices, with the direct kernels' family, when `T` is f32 and a
+/// vector family may run.
+#[allow(clippy::type_complexity)]
 fn as_f32<'a, T: WithDType>(
     a: &'a [T],
     b: &'a [T],
     out: &'a mut [T],
-) -> Option<(&'a [f32], &'a [f32], &'a mut [f32])> {
-    if T::DTYPE != DType::F32 || !direct_conv_enabled() {
+) -> Option<((&'a [f32], &'a [f32], &'a mut [f32]), SimdFamily)> {
+    let family = direct_family();
+    if T::DTYPE != DType::F32 || family == SimdFamily::Scalar {
         return None;
     }
     // SAFETY: `T` is f32 (its DTYPE says so), so the slices' elements are f32.
-    unsafe {
-        Some((
+    let slices = unsafe {
+        (
             std::slice::from_raw_parts(a.as_ptr() as *const f32, a.len()),
             std::slice::from_raw_parts(b.as_ptr() as *const f32, b.len()),
             std::slice::from_raw_parts_mut(out.as_mut_ptr() as *mut f32, out.len()),
-        ))
-    }
+        )
+    };
+    Some((slices, family))
 }
 
 /// Forward: writes every element of `y` (B·C_out·H_out·W_out), on the direct kernels when
-/// they take the geometry, else on im2col + `gemm`.
+/// they take the geometry, else on im2col + `gemm`. Reads the kernel family of the calling
+/// thread ([`SimdFamily::active`]).
 pub(crate) fn forward_into<T: WithDType>(
     g: &Geometry,
     x: &[T],
@@ -117,8 +128,10 @@ pub(crate) fn forward_into<T: WithDType>(
     y: &mut [T],
     threads: usize,
 ) {
-    if let Some((x, w, y)) = as_f32(x, w, y).filter(|_| direct_conv::supports_forward(g)) {
-        direct_conv::forward(g, x, w, y, threads);
+    if let Some(((x, w, y), family)) = as_f32(x, w, y)
+        && direct_conv::supports_forward(g, family)
+    {
+        direct_conv::forward(g, x, w, y, (threads, family));
         return;
     }
     im2col::forward(g, x, w, y, threads);
@@ -126,13 +139,13 @@ pub(crate) fn forward_into<T: WithDType>(
 
 /// Input gradient: writes every element of `dx` (B·C_in·H·W) from `dy` and `w`.
 fn input_grad_into<T: WithDType>(g: &Geometry, dy: &[T], w: &[T], dx: &mut [T], threads: usize) {
-    if let Some((dy, w, dx)) = as_f32(dy, w, dx) {
-        if direct_conv::supports_input_grad(g) {
-            direct_conv::input_grad(g, dy, w, dx, threads);
+    if let Some(((dy, w, dx), family)) = as_f32(dy, w, dx) {
+        if direct_conv::supports_input_grad(g, family) {
+            direct_conv::input_grad(g, dy, w, dx, (threads, family));
             return;
         }
-        if strided_input_grad::supports(g) {
-            strided_input_grad::input_grad(g, dy, w, dx, threads);
+        if strided_input_grad::supports(g, family) {
+            strided_input_grad::input_grad(g, dy, w, dx, (threads, family));
             return;
         }
     }
@@ -141,8 +154,10 @@ fn input_grad_into<T: WithDType>(g: &Geometry, dy: &[T], w: &[T], dx: &mut [T], 
 
 /// Weight gradient: writes every element of `dw` (C_out·C_in·kh·kw) from `x` and `dy`.
 fn weight_grad_into<T: WithDType>(g: &Geometry, x: &[T], dy: &[T], dw: &mut [T], threads: usize) {
-    if let Some((x, dy, dw)) = as_f32(x, dy, dw).filter(|_| direct_weight_grad::prefers(g)) {
-        direct_weight_grad::weight_grad(g, x, dy, dw, threads);
+    if let Some(((x, dy, dw), family)) = as_f32(x, dy, dw)
+        && direct_weight_grad::prefers(g, family)
+    {
+        direct_weight_grad::weight_grad(g, x, dy, dw, (threads, family));
         return;
     }
     im2col::weight_grad(g, x, dy, dw, threads);
@@ -331,6 +346,7 @@ mod tests {
     use candle_core::{Device, Var};
 
     use super::*;
+    use crate::simd::with_simd_family;
     use crate::testing::max_abs_diff;
     use photomat_core::rng::pseudo_random;
 
@@ -428,6 +444,57 @@ mod tests {
         // f32: sums of ≤ 300 terms of magnitude ≤ 1, ε = 6e-8 ⇒ ≲ 300·6e-8 ≈ 2e-5 worst case.
         check_against_reference(PaddingMode::Zeros, DType::F32, 1e-4)?;
         check_against_reference(PaddingMode::Circular, DType::F32, 1e-4)
+    }
+
+    /// conv2d through every kernel family this CPU runs (the family forced on the calling
+    /// thread, as a user's `PHOTOMAT_SIMD` would): forward and both gradients of layers the
+    /// direct kernels take (3×3 same, 4×4 stride 2, the discriminator's 3×3 stride 2 on 33
+    /// columns, zero and circular) equal the f64 reference. What runs where is the family's
+    /// choice; the op must give the same values on each.
+    #[test]
+    fn conv_on_every_kernel_family_matches_the_reference() -> Result<()> {
+        let dev = Device::Cpu;
+        let layers = [
+            ((2, 6, 12, 32), 5, 3, Conv2dSpec::zeros(1, 1)),
+            ((2, 6, 12, 32), 5, 3, Conv2dSpec::circular(1, 1)),
+            ((1, 4, 16, 32), 7, 4, Conv2dSpec::circular(2, 1)),
+            ((2, 3, 9, 33), 4, 3, Conv2dSpec::zeros(2, 0)),
+        ];
+        for family in SimdFamily::ALL {
+            for (seed, &(xs, co, k, spec)) in layers.iter().enumerate() {
+                let seed = 4 * seed as u64;
+                let x64 = pseudo_random(xs, seed, DType::F64, &dev)?;
+                let w64 = pseudo_random((co, xs.1, k, k), seed + 1, DType::F64, &dev)?;
+                let g64 = pseudo_random(
+                    Geometry::new(xs, w64.dims4()?, spec)?.y_shape(),
+                    seed + 2,
+                    DType::F64,
+                    &dev,
+                )?;
+                let (rx, rw) = (Var::from_tensor(&x64)?, Var::from_tensor(&w64)?);
+                let reference = value_and_grads(conv2d_reference, &rx, &rw, &g64, spec)?;
+                let f32 = |t: &Tensor| t.to_dtype(DType::F32);
+                let (x, w) = (
+                    Var::from_tensor(&f32(&x64)?)?,
+                    Var::from_tensor(&f32(&w64)?)?,
+                );
+                let (ran, got) = with_simd_family(family, || {
+                    value_and_grads(conv2d, &x, &w, &f32(&g64)?, spec)
+                });
+                let got = got?;
+                for (what, a, b) in [
+                    ("forward", &got.0, &reference.0),
+                    ("input gradient", &got.1, &reference.1),
+                    ("weight gradient", &got.2, &reference.2),
+                ] {
+                    // f32 sums of ≤ 6·16 = 96 products (weight gradients: ≤ 768 texels) of
+                    // values in [−1, 1]: rounding ≲ 5e-5; a wrong tap is off by O(0.1).
+                    let err = max_abs_diff(&a.to_dtype(DType::F64)?, b)?;
+                    assert!(err < 1e-4, "{ran:?} {spec:?} {xs:?} {what}: {err}");
+                }
+            }
+        }
+        Ok(())
     }
 
     #[test]

@@ -1,37 +1,41 @@
 //! The register tiles of the direct convolutions ([`crate::direct_conv`]'s forward and
 //! stride-1 input gradient, [`crate::strided_input_grad`]'s phases): weights packed in tile
-//! order, the bands of output rows a task computes, and the AVX-512 tile that sums one block
-//! of output channels × a few vectors of output texels over every input channel and tap,
+//! order, the bands of output rows a task computes, and the tile that sums one block of output
+//! channels × a few vectors of output texels over every input channel and tap,
 //!
 //! ```text
-//! y[o, p..p+16] += W[o, c, ky, kx] · xp[c, origin(p) + tap(ky, kx) .. +16]
+//! y[o, p..p+L] += W[o, c, ky, kx] · xp[c, origin(p) + tap(ky, kx) .. +L]
 //! ```
 //!
-//! one broadcast weight and one unaligned load per tile row and column (Georganas et al.,
-//! "Anatomy of high-performance deep learning convolutions on SIMD architectures", SC 2018).
-//! A tile of `OC_BLOCK` output channels × `TILE_VECTORS` vectors keeps 24 accumulators of the
-//! 32 registers; a row's last, partial vector reads and writes only its lanes.
+//! (`L` lanes per vector) with one broadcast weight and one unaligned load per tile row and
+//! column (Georganas et al., "Anatomy of high-performance deep learning convolutions on SIMD
+//! architectures", SC 2018). Written once over [`Simd`]: a tile of `OC_BLOCK` output channels
+//! × `TILE_VECTORS` vectors fills the family's registers (6 × 4 of AVX-512's 32, 4 × 3 of
+//! AVX2's 16, with the input vectors and the weight); a row's last, partial vector reads and
+//! writes only its lanes.
 
-use crate::avx512::{LANES, lane_mask};
+use crate::simd::{Kernel, Simd};
 
-/// Output channels per register tile.
-pub(crate) const OC_BLOCK: usize = 6;
+/// Output channels per tile of the widest family: the accumulators' array size (a family
+/// with fewer, [`Simd::OC_BLOCK`], leaves the last rows unused, which the compiler drops).
+const MAX_OC_BLOCK: usize = 6;
 
-/// Vectors of 16 output texels per register tile: `OC_BLOCK × TILE_VECTORS` = 24
-/// accumulators, plus `TILE_VECTORS` input vectors and one broadcast weight, of 32 registers.
-const TILE_VECTORS: usize = 4;
-
-/// Weights in tile order: block `b` of [`OC_BLOCK`] output channels, then lowered row
-/// `k = (c·kh + ky)·kw + kx`, then the block's channels, zeros past `co`.
+/// Weights in tile order for family `S`: block `b` of [`Simd::OC_BLOCK`] output channels,
+/// then lowered row `k = (c·kh + ky)·kw + kx`, then the block's channels, zeros past `co`.
 /// `row(o, dst)` writes row `o` (its `k` weights) of the `co × k` kernel matrix into `dst`.
-pub(crate) fn pack_weights(co: usize, k: usize, row: impl Fn(usize, &mut [f32])) -> Vec<f32> {
-    let mut packed = vec![0.0; co.div_ceil(OC_BLOCK) * k * OC_BLOCK];
+pub(crate) fn pack_weights<S: Simd>(
+    co: usize,
+    k: usize,
+    row: impl Fn(usize, &mut [f32]),
+) -> Vec<f32> {
+    let block_len = S::OC_BLOCK;
+    let mut packed = vec![0.0; co.div_ceil(block_len) * k * block_len];
     let mut scratch = vec![0.0; k];
     for o in 0..co {
         row(o, &mut scratch);
-        let (b, j) = (o / OC_BLOCK, o % OC_BLOCK);
-        let block = &mut packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
-        for (dst, &v) in block[j..].iter_mut().step_by(OC_BLOCK).zip(&scratch) {
+        let (b, j) = (o / block_len, o % block_len);
+        let block = &mut packed[b * k * block_len..(b + 1) * k * block_len];
+        for (dst, &v) in block[j..].iter_mut().step_by(block_len).zip(&scratch) {
             *dst = v;
         }
     }
@@ -70,13 +74,19 @@ pub(crate) struct TileGrid<'a> {
 }
 
 /// Computes every output channel of one band ([`TileGrid`]) from `xp` and the weights packed
-/// in tile order ([`pack_weights`]: `OC_BLOCK` channels, then `ci · taps` rows), in tiles of
-/// [`TILE_VECTORS`] output vectors in row-major order.
+/// in tile order for `S` ([`pack_weights`]: `OC_BLOCK` channels, then `ci · taps` rows), in
+/// tiles of `TILE_VECTORS` output vectors in row-major order.
 ///
 /// # Safety
-/// `y_addr` is the address of the output planes; no other thread writes the band's rows
-/// while this runs, and `xp` holds every float the taps read (module docs).
-pub(crate) unsafe fn run_tiles(grid: &TileGrid, xp: &[f32], packed: &[f32], y_addr: usize) {
+/// The CPU has `S`'s features; `y_addr` is the address of the output planes; no other thread
+/// writes the band's rows while this runs, and `xp` holds every float the taps read (module
+/// docs).
+pub(crate) unsafe fn run_tiles<S: Simd>(
+    grid: &TileGrid,
+    xp: &[f32],
+    packed: &[f32],
+    y_addr: usize,
+) {
     let TileGrid {
         ci,
         plane_in,
@@ -92,126 +102,117 @@ pub(crate) unsafe fn run_tiles(grid: &TileGrid, xp: &[f32], packed: &[f32], y_ad
     let k = ci * taps.len();
     // The band's vectors in row-major order, (input offset in `xp`, output offset in a plane,
     // lanes): each row's whole vectors, then its last, partial one masked.
-    let mut vectors = Vec::with_capacity(rows * wo.div_ceil(LANES));
+    let mut vectors = Vec::with_capacity(rows * wo.div_ceil(S::LANES));
     for oy in 0..rows {
-        for ox in (0..wo).step_by(LANES) {
-            let mask = lane_mask(wo - ox);
-            vectors.push((in_base + oy * in_row + ox, out_base + oy * wo + ox, mask));
+        for ox in (0..wo).step_by(S::LANES) {
+            let lanes = S::LANES.min(wo - ox);
+            vectors.push((in_base + oy * in_row + ox, out_base + oy * wo + ox, lanes));
         }
     }
     let y = y_addr as *mut f32;
-    // Tiles of TILE_VECTORS consecutive vectors, the band's last tile of 1 to 3: a row's
+    let block_len = S::OC_BLOCK;
+    // Tiles of TILE_VECTORS consecutive vectors, the band's last tile shorter: a row's
     // partial vector shares a tile with its neighbours rather than taking one alone. Every
     // block of output channels runs on a group of vectors before the next group: the
-    // group's input rows (C_in · 4 vectors per tap row) stay in L1 across the blocks, and
-    // only the broadcast weights (6 floats per channel and tap) come from L2.
-    for group in vectors.chunks(TILE_VECTORS) {
-        for b in 0..co.div_ceil(OC_BLOCK) {
-            let wb = &packed[b * k * OC_BLOCK..(b + 1) * k * OC_BLOCK];
-            let channels = OC_BLOCK.min(co - b * OC_BLOCK);
-            // SAFETY: block b's first channel plane lies inside the outputs.
-            let out = (unsafe { y.add(b * OC_BLOCK * plane_out) }, plane_out);
-            // SAFETY: AVX-512F was detected (the callers' gates); loads stay inside `xp`,
-            // stores inside the tile's outputs, masked lanes past a row's end are neither
-            // read nor written (caller's contract).
+    // group's input rows (C_in · TILE_VECTORS vectors per tap row) stay in L1 across the
+    // blocks, and only the broadcast weights (OC_BLOCK floats per channel and tap) come from
+    // L2.
+    for group in vectors.chunks(S::TILE_VECTORS) {
+        for b in 0..co.div_ceil(block_len) {
+            let weights = &packed[b * k * block_len..(b + 1) * k * block_len];
+            let tile = Tile {
+                xp,
+                plane_in,
+                ci,
+                taps,
+                group,
+                weights,
+                // Block b's first channel plane lies inside the outputs.
+                y: y.wrapping_add(b * block_len * plane_out),
+                plane_out,
+                channels: block_len.min(co - b * block_len),
+            };
+            // SAFETY: the CPU has S's features (the caller's); loads stay inside `xp`, stores
+            // inside the tile's outputs, masked lanes past a row's end are neither read nor
+            // written (the caller's contract).
             unsafe {
                 match group.len() {
-                    4 => tile_of::<4>(xp, plane_in, ci, taps, group, wb, out, channels),
-                    3 => tile_of::<3>(xp, plane_in, ci, taps, group, wb, out, channels),
-                    2 => tile_of::<2>(xp, plane_in, ci, taps, group, wb, out, channels),
-                    _ => tile_of::<1>(xp, plane_in, ci, taps, group, wb, out, channels),
+                    4 => S::vectorize(TileOf::<4>(tile)),
+                    3 => S::vectorize(TileOf::<3>(tile)),
+                    2 => S::vectorize(TileOf::<2>(tile)),
+                    _ => S::vectorize(TileOf::<1>(tile)),
                 }
             }
         }
     }
 }
 
-/// [`tile`] over `NV` vectors given as (input offset, output offset, lanes) triples.
-///
-/// # Safety
-/// As [`tile`]'s.
-#[allow(clippy::too_many_arguments)]
-unsafe fn tile_of<const NV: usize>(
-    xp: &[f32],
+/// One register tile's operands: `channels` (≤ `OC_BLOCK`) output channels from `y` (planes
+/// `plane_out` apart) × the vectors of `group` ((input offset, output offset, lanes)),
+/// summed over `ci` channels of `xp` (`plane_in` apart) and the `taps`.
+#[derive(Clone, Copy)]
+struct Tile<'a> {
+    xp: &'a [f32],
     plane_in: usize,
     ci: usize,
-    taps: &[usize],
-    group: &[(usize, usize, u16)],
-    wb: &[f32],
-    out: (*mut f32, usize),
+    taps: &'a [usize],
+    group: &'a [(usize, usize, usize)],
+    weights: &'a [f32],
+    y: *mut f32,
+    plane_out: usize,
     channels: usize,
-) {
-    let ins: [usize; NV] = std::array::from_fn(|j| group[j].0);
-    let outs: [usize; NV] = std::array::from_fn(|j| group[j].1);
-    let masks: [u16; NV] = std::array::from_fn(|j| group[j].2);
-    // SAFETY: the caller's.
-    unsafe { tile::<NV>(xp, plane_in, ci, taps, ins, wb, out, outs, masks, channels) }
 }
 
-/// One register tile: `rows` (≤ [`OC_BLOCK`]) output channels × `NV` vectors, summed over
-/// `ci` channels and the taps, stored at `y.0 + o·y.1 + outs[j]`. Vector `j` reads and writes
-/// only the lanes of `masks[j]` (all 16 but in a row's last, partial vector).
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-#[allow(clippy::too_many_arguments)]
-unsafe fn tile<const NV: usize>(
-    xp: &[f32],
-    plane_in: usize,
-    ci: usize,
-    taps: &[usize],
-    ins: [usize; NV],
-    wb: &[f32],
-    (y, plane_out): (*mut f32, usize),
-    outs: [usize; NV],
-    masks: [u16; NV],
-    rows: usize,
-) {
-    use std::arch::x86_64::*;
-    let mut acc = [[_mm512_setzero_ps(); NV]; OC_BLOCK];
-    let mut w = wb.as_ptr();
-    let x0 = xp.as_ptr();
-    let partial = masks.iter().any(|&m| m != u16::MAX);
-    for c in 0..ci {
-        let xc = unsafe { x0.add(c * plane_in) };
-        for &t in taps {
-            let mut xv = [_mm512_setzero_ps(); NV];
-            for j in 0..NV {
-                let at = unsafe { xc.add(ins[j] + t) };
-                xv[j] = if partial {
-                    unsafe { _mm512_maskz_loadu_ps(masks[j], at) }
-                } else {
-                    unsafe { _mm512_loadu_ps(at) }
-                };
-            }
-            for (o, row) in acc.iter_mut().enumerate() {
-                let wv = _mm512_set1_ps(unsafe { *w.add(o) });
+/// [`Tile`] over `NV` vectors, as a [`Kernel`].
+struct TileOf<'a, const NV: usize>(Tile<'a>);
+
+impl<const NV: usize> Kernel for TileOf<'_, NV> {
+    type Output = ();
+
+    /// Vector `j` reads and writes only its first `lanes` lanes (all but in a row's last,
+    /// partial vector).
+    #[inline(always)]
+    unsafe fn run<S: Simd>(self) {
+        let t = self.0;
+        let ins: [usize; NV] = std::array::from_fn(|j| t.group[j].0);
+        let outs: [usize; NV] = std::array::from_fn(|j| t.group[j].1);
+        let partial = t.group.iter().any(|v| v.2 < S::LANES);
+        // SAFETY (every block below): the CPU has S's features and every access stays inside
+        // the operands (`run_tiles`'s contract).
+        let masks: [S::Mask; NV] = std::array::from_fn(|j| unsafe { S::mask(t.group[j].2) });
+        let mut acc = [[unsafe { S::zero() }; NV]; MAX_OC_BLOCK];
+        let mut w = t.weights.as_ptr();
+        let x0 = t.xp.as_ptr();
+        for c in 0..t.ci {
+            let xc = unsafe { x0.add(c * t.plane_in) };
+            for &tap in t.taps {
+                let mut xv = [unsafe { S::zero() }; NV];
                 for j in 0..NV {
-                    row[j] = _mm512_fmadd_ps(xv[j], wv, row[j]);
+                    let at = unsafe { xc.add(ins[j] + tap) };
+                    xv[j] = if partial {
+                        unsafe { S::load_masked(masks[j], at) }
+                    } else {
+                        unsafe { S::load(at) }
+                    };
+                }
+                for (o, row) in acc.iter_mut().enumerate().take(S::OC_BLOCK) {
+                    let wv = unsafe { S::splat(*w.add(o)) };
+                    for j in 0..NV {
+                        row[j] = unsafe { S::fmadd(xv[j], wv, row[j]) };
+                    }
+                }
+                w = unsafe { w.add(S::OC_BLOCK) };
+            }
+        }
+        for (o, row) in acc.iter().enumerate().take(t.channels) {
+            for j in 0..NV {
+                let at = unsafe { t.y.add(o * t.plane_out + outs[j]) };
+                if partial {
+                    unsafe { S::store_masked(masks[j], at, row[j]) };
+                } else {
+                    unsafe { S::store(at, row[j]) };
                 }
             }
-            w = unsafe { w.add(OC_BLOCK) };
         }
     }
-    for (o, row) in acc.iter().enumerate().take(rows) {
-        for j in 0..NV {
-            unsafe { _mm512_mask_storeu_ps(y.add(o * plane_out + outs[j]), masks[j], row[j]) };
-        }
-    }
-}
-
-#[cfg(not(target_arch = "x86_64"))]
-#[allow(clippy::too_many_arguments)]
-unsafe fn tile<const NV: usize>(
-    _: &[f32],
-    _: usize,
-    _: usize,
-    _: &[usize],
-    _: [usize; NV],
-    _: &[f32],
-    _: (*mut f32, usize),
-    _: [usize; NV],
-    _: [u16; NV],
-    _: usize,
-) {
-    unreachable!("AVX-512 only: supports_forward is false on this architecture")
 }

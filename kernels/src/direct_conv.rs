@@ -30,27 +30,27 @@
 use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
-use crate::avx512::{LANES, has_avx512};
 use crate::conv_geometry::{Conv2dSpec, Geometry, PaddingMode};
 use crate::conv_tiles::{MIN_BAND_ROWS, PAD_BAND_BYTES, TileGrid, pack_weights, run_tiles};
 use crate::padded_input::{Padded, pad_rows};
+use crate::simd::{Simd, SimdFamily, on_family};
 
 /// Whether [`forward`] computes this convolution: any but a pointwise one with output rows of
 /// at least one vector (a row's last, partial vector is masked).
-pub(crate) fn supports_forward(g: &Geometry) -> bool {
-    !g.is_pointwise() && g.wo >= LANES && has_avx512()
+pub(crate) fn supports_forward(g: &Geometry, family: SimdFamily) -> bool {
+    family != SimdFamily::Scalar && !g.is_pointwise() && g.wo >= family.lanes()
 }
 
 /// The forward convolution whose value is the input gradient of `g`, with its
 /// flipped-and-transposed kernel's geometry; `None` when that is not a stride-1 convolution
 /// [`forward`] handles (module docs).
-pub(crate) fn input_grad_geometry(g: &Geometry) -> Option<Geometry> {
-    if g.is_pointwise()
+pub(crate) fn input_grad_geometry(g: &Geometry, family: SimdFamily) -> Option<Geometry> {
+    if family == SimdFamily::Scalar
+        || g.is_pointwise()
         || g.stride != 1
         || g.pad >= g.kh
         || g.pad >= g.kw
-        || g.w < LANES
-        || !has_avx512()
+        || g.w < family.lanes()
     {
         return None;
     }
@@ -77,63 +77,79 @@ pub(crate) fn input_grad_geometry(g: &Geometry) -> Option<Geometry> {
 
 /// Whether [`input_grad`] computes this (stride-1) convolution's input gradient, as the
 /// adjoint forward.
-pub(crate) fn supports_input_grad(g: &Geometry) -> bool {
-    input_grad_geometry(g).is_some()
+pub(crate) fn supports_input_grad(g: &Geometry, family: SimdFamily) -> bool {
+    input_grad_geometry(g, family).is_some()
 }
 
 /// Forward convolution: writes every element of `y` (B·C_out·H_out·W_out) from `x`
-/// (B·C_in·H·W) and `w` (C_out·C_in·kh·kw). Requires [`supports_forward`].
-pub(crate) fn forward(g: &Geometry, x: &[f32], w: &[f32], y: &mut [f32], threads: usize) {
+/// (B·C_in·H·W) and `w` (C_out·C_in·kh·kw) on `family`'s kernels. Requires
+/// [`supports_forward`] (`family` is then one the CPU has: [`SimdFamily::active`]).
+pub(crate) fn forward(
+    g: &Geometry,
+    x: &[f32],
+    w: &[f32],
+    y: &mut [f32],
+    (threads, family): (usize, SimdFamily),
+) {
     assert!(
-        supports_forward(g),
+        supports_forward(g, family),
         "direct conv: unsupported geometry {g:?}"
     );
-    run(g, x, &pack_forward(g, w), y, threads);
+    on_family!(family, S => run::<S>(g, x, &pack_forward::<S>(g, w), y, threads));
 }
 
 /// The forward's weights (C_out·C_in·kh·kw) in tile order ([`pack_weights`]).
-fn pack_forward(g: &Geometry, w: &[f32]) -> Vec<f32> {
-    pack_weights(g.co, g.k(), |o, dst| {
+fn pack_forward<S: Simd>(g: &Geometry, w: &[f32]) -> Vec<f32> {
+    pack_weights::<S>(g.co, g.k(), |o, dst| {
         dst.copy_from_slice(&w[o * g.k()..][..g.k()])
     })
 }
 
 /// Input gradient: writes every element of `dx` (B·C_in·H·W) from `dy` (B·C_out·H_out·W_out)
 /// and `w` (C_out·C_in·kh·kw), as the forward convolution of `dy` with the flipped,
-/// transposed kernel. Requires [`supports_input_grad`].
-pub(crate) fn input_grad(g: &Geometry, dy: &[f32], w: &[f32], dx: &mut [f32], threads: usize) {
-    let adjoint = input_grad_geometry(g).expect("direct conv: unsupported input gradient");
+/// transposed kernel, on `family`'s kernels. Requires [`supports_input_grad`].
+pub(crate) fn input_grad(
+    g: &Geometry,
+    dy: &[f32],
+    w: &[f32],
+    dx: &mut [f32],
+    (threads, family): (usize, SimdFamily),
+) {
+    let adjoint = input_grad_geometry(g, family).expect("direct conv: unsupported input gradient");
+    on_family!(family, S => run::<S>(&adjoint, dy, &pack_adjoint::<S>(g, w), dx, threads));
+}
+
+/// The adjoint kernel of `g`'s weights in tile order: [c][o][ky'][kx'] =
+/// W[o][c][kh−1−ky'][kw−1−kx'], each (o, c) kernel reversed.
+fn pack_adjoint<S: Simd>(g: &Geometry, w: &[f32]) -> Vec<f32> {
     let taps = g.kh * g.kw;
-    // Adjoint kernel [c][o][ky'][kx'] = W[o][c][kh−1−ky'][kw−1−kx']: each (o, c) kernel
-    // reversed.
-    let packed = pack_weights(adjoint.co, adjoint.k(), |c, dst| {
+    pack_weights::<S>(g.ci, g.co * taps, |c, dst| {
         for (o, flipped) in dst.chunks_exact_mut(taps).enumerate() {
             let kernel = &w[(o * g.ci + c) * taps..][..taps];
             for (d, &v) in flipped.iter_mut().zip(kernel.iter().rev()) {
                 *d = v;
             }
         }
-    });
-    run(&adjoint, dy, &packed, dx, threads);
+    })
 }
 
 /// Runs the forward tiles of every image, band of output rows by band of output rows: the
 /// (image, band) pairs are the parallel tasks, each padding the input rows its band reads
 /// into its own buffer. Bands hold [`PAD_BAND_BYTES`] of padded input, and are cut finer when
 /// there are fewer images than threads, so that every thread has work.
-fn run(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], threads: usize) {
+fn run<S: Simd>(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], threads: usize) {
     // Padded input bytes per output row: `s` padded rows of every channel.
     let row_bytes = 4 * g.ci * g.stride * Padded::new(g, 1).row;
     let mut band = (PAD_BAND_BYTES / row_bytes.max(1)).max(MIN_BAND_ROWS);
     if threads > 1 && g.b < threads {
         band = band.min(g.ho.div_ceil(2 * threads));
     }
-    run_in_bands(g, x, packed, y, band.clamp(1, g.ho));
+    run_in_bands::<S>(g, x, packed, y, band.clamp(1, g.ho));
 }
 
 /// [`run`] with bands of `band` output rows (the last one shorter when they do not divide
 /// `H_out`).
-fn run_in_bands(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], band: usize) {
+fn run_in_bands<S: Simd>(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], band: usize) {
     let (x_len, y_len) = (g.ci * g.h * g.w, g.co * g.ho * g.wo);
     // The tasks write through raw pointers: the output must be exactly the batch's.
     assert_eq!(
@@ -156,7 +172,7 @@ fn run_in_bands(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], band: us
             let r1 = (r0 + band).min(g.ho);
             // The last band may read fewer rows: pad only those.
             let read = (r1 - r0 - 1) * g.stride + g.kh;
-            pad_rows(
+            pad_rows::<S>(
                 g,
                 layout,
                 &x[i * x_len..(i + 1) * x_len],
@@ -176,9 +192,10 @@ fn run_in_bands(g: &Geometry, x: &[f32], packed: &[f32], y: &mut [f32], band: us
                 wo: g.wo,
                 out_base: r0 * g.wo,
             };
-            // SAFETY: `y` outlives the tasks; task (i, band) writes only output rows r0..r1
-            // of image i, which no other task writes; `xp` holds the padded rows they read.
-            unsafe { run_tiles(&grid, xp, packed, yi) };
+            // SAFETY: the CPU has S's features (`forward`'s contract); `y` outlives the tasks;
+            // task (i, band) writes only output rows r0..r1 of image i, which no other task
+            // writes; `xp` holds the padded rows they read.
+            unsafe { run_tiles::<S>(&grid, xp, packed, yi) };
         },
     );
 }
@@ -189,43 +206,48 @@ mod tests {
 
     use super::*;
     use crate::conv::conv2d_reference;
+    use crate::simd::vector_families;
     use crate::testing::max_abs_diff;
     use photomat_core::rng::pseudo_random;
 
     #[test]
     fn direct_forward_in_bands_of_rows_equals_the_whole_image() -> Result<()> {
-        if !has_avx512() {
-            eprintln!("no AVX-512 on this CPU: the direct kernels are never used");
-            return Ok(());
-        }
         // 16 output rows in bands of 3 (the last of 1), stride 1 and 2: each band pads its own
         // halo rows, zero or wrapped, and writes only its rows.
         let dev = Device::Cpu;
-        for (stride, pad, w) in [(1, 1, 16), (2, 1, 32)] {
-            for mode in [PaddingMode::Zeros, PaddingMode::Circular] {
-                let spec = Conv2dSpec {
-                    stride,
-                    padding: pad,
-                    mode,
-                };
-                let x = pseudo_random((2, 3, 16 * stride, w), 11, DType::F32, &dev)?;
-                let wt = pseudo_random((5, 3, 3, 3), 12, DType::F32, &dev)?;
-                let g = Geometry::new(x.dims4()?, wt.dims4()?, spec)?;
-                assert_eq!(g.ho, 16);
-                let (xv, wv) = (
-                    x.flatten_all()?.to_vec1::<f32>()?,
-                    wt.flatten_all()?.to_vec1::<f32>()?,
-                );
-                let packed = pack_forward(&g, &wv);
-                let mut whole = vec![f32::NAN; g.y_shape().elem_count()];
-                run_in_bands(&g, &xv, &packed, &mut whole, 16);
-                let mut banded = vec![f32::NAN; g.y_shape().elem_count()];
-                run_in_bands(&g, &xv, &packed, &mut banded, 3);
-                // Same sums in the same order: equal to the bit.
-                assert_eq!(whole, banded, "{spec:?}");
-                let reference = conv2d_reference(&x, &wt, spec)?;
-                let banded = Tensor::from_vec(banded, g.y_shape(), &dev)?;
-                assert!(max_abs_diff(&banded, &reference)? < 1e-4, "{spec:?}");
+        for family in vector_families() {
+            for (stride, pad, w) in [(1, 1, 16), (2, 1, 32)] {
+                for mode in [PaddingMode::Zeros, PaddingMode::Circular] {
+                    let spec = Conv2dSpec {
+                        stride,
+                        padding: pad,
+                        mode,
+                    };
+                    let x = pseudo_random((2, 3, 16 * stride, w), 11, DType::F32, &dev)?;
+                    let wt = pseudo_random((5, 3, 3, 3), 12, DType::F32, &dev)?;
+                    let g = Geometry::new(x.dims4()?, wt.dims4()?, spec)?;
+                    assert_eq!(g.ho, 16);
+                    let (xv, wv) = (
+                        x.flatten_all()?.to_vec1::<f32>()?,
+                        wt.flatten_all()?.to_vec1::<f32>()?,
+                    );
+                    let run = |band: usize| {
+                        let mut y = vec![f32::NAN; g.y_shape().elem_count()];
+                        on_family!(family, S => {
+                            run_in_bands::<S>(&g, &xv, &pack_forward::<S>(&g, &wv), &mut y, band)
+                        });
+                        y
+                    };
+                    let (whole, banded) = (run(16), run(3));
+                    // Same sums in the same order: equal to the bit.
+                    assert_eq!(whole, banded, "{family:?} {spec:?}");
+                    let reference = conv2d_reference(&x, &wt, spec)?;
+                    let banded = Tensor::from_vec(banded, g.y_shape(), &dev)?;
+                    assert!(
+                        max_abs_diff(&banded, &reference)? < 1e-4,
+                        "{family:?} {spec:?}"
+                    );
+                }
             }
         }
         Ok(())

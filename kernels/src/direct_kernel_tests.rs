@@ -1,12 +1,13 @@
 //! Tests of every direct convolution kernel ([`crate::direct_conv`],
-//! [`crate::strided_input_grad`], [`crate::direct_weight_grad`]) against the f64 reference on
-//! the same inputs, and of the gates that decide which geometries they take.
+//! [`crate::strided_input_grad`], [`crate::direct_weight_grad`]) of every vector family this
+//! CPU runs (forced, so that an AVX-512 machine tests the AVX2 kernels too) against the f64
+//! reference on the same inputs, and of the gates that decide which geometries they take.
 
 use candle_core::{DType, Device, Result, Tensor};
 
-use crate::avx512::has_avx512;
 use crate::conv::{apply_input_grad, apply_weight_grad, conv2d_reference};
 use crate::conv_geometry::{Conv2dSpec, Geometry, PaddingMode};
+use crate::simd::{SimdFamily, vector_families};
 use crate::testing::max_abs_diff;
 use crate::{direct_conv, direct_weight_grad, strided_input_grad};
 use photomat_core::rng::pseudo_random;
@@ -51,11 +52,16 @@ const CASES: &[Case] = &[
 ];
 
 #[test]
-fn direct_conv_matches_the_f64_reference_and_its_gradients() -> Result<()> {
-    if !has_avx512() {
-        eprintln!("no AVX-512 on this CPU: the direct kernels are never used");
-        return Ok(());
+fn direct_kernels_of_every_family_match_the_f64_reference() -> Result<()> {
+    for family in vector_families() {
+        check_family(family)?;
     }
+    Ok(())
+}
+
+/// Every case through `family`'s direct kernels (forced: the family the test names, not the
+/// process's), each kernel at three thread counts, against the f64 reference.
+fn check_family(family: SimdFamily) -> Result<()> {
     let dev = Device::Cpu;
     let mut direct = (0, 0, 0);
     for (seed, &(b, ci, h, w, co, k, stride, p)) in CASES.iter().enumerate() {
@@ -75,12 +81,16 @@ fn direct_conv_matches_the_f64_reference_and_its_gradients() -> Result<()> {
             let dw_ref = apply_weight_grad(g, &x, &dy)?;
             let f32s = |t: &Tensor| t.to_dtype(DType::F32)?.flatten_all()?.to_vec1::<f32>();
             let (xv, wv, dyv) = (f32s(&x)?, f32s(&wt)?, f32s(&dy)?);
-            let case = format!("{mode:?} x{:?} co {co} k{k} s{stride} p{p}", (b, ci, h, w));
+            let case = format!(
+                "{family:?} {mode:?} x{:?} co {co} k{k} s{stride} p{p}",
+                (b, ci, h, w)
+            );
             // f32 sums of ≤ 70·9 = 630 products of values in [−1, 1]: rounding ≲ 630·6e-8;
             // a wrong tap or channel is off by O(0.1).
             // Weight gradients sum over B·H_out·W_out ≤ 768 texels: rounding ≲ 5e-5.
             let tol = 1e-4;
             for threads in [1, 2, 3] {
+                let on = (threads, family);
                 // Runs one kernel into a NaN-filled buffer (an unwritten output stays NaN
                 // and fails the comparison) and compares it with the f64 reference.
                 let check = |what: &str, reference: &Tensor, run: &dyn Fn(&mut [f32])| {
@@ -92,65 +102,84 @@ fn direct_conv_matches_the_f64_reference_and_its_gradients() -> Result<()> {
                     assert!(err < tol, "{what} {case} threads {threads}: {err}");
                     Result::Ok(())
                 };
-                if direct_conv::supports_forward(&g) {
+                if direct_conv::supports_forward(&g, family) {
                     direct.0 += 1;
                     check("forward", &y_ref, &|y| {
-                        direct_conv::forward(&g, &xv, &wv, y, threads)
+                        direct_conv::forward(&g, &xv, &wv, y, on)
                     })?;
                 }
-                if direct_conv::supports_input_grad(&g) || strided_input_grad::supports(&g) {
+                if direct_conv::supports_input_grad(&g, family) {
                     direct.1 += 1;
-                    let run = |dx: &mut [f32]| {
-                        if g.stride == 1 {
-                            direct_conv::input_grad(&g, &dyv, &wv, dx, threads)
-                        } else {
-                            strided_input_grad::input_grad(&g, &dyv, &wv, dx, threads)
-                        }
-                    };
+                    let run = |dx: &mut [f32]| direct_conv::input_grad(&g, &dyv, &wv, dx, on);
                     check("input gradient", &dx_ref, &run)?;
                 }
-                if direct_weight_grad::supports(&g) {
+                if strided_input_grad::supports(&g, family) {
+                    direct.1 += 1;
+                    let run =
+                        |dx: &mut [f32]| strided_input_grad::input_grad(&g, &dyv, &wv, dx, on);
+                    check("strided input gradient", &dx_ref, &run)?;
+                }
+                if direct_weight_grad::supports(&g, family) {
                     direct.2 += 1;
-                    let run = |dw: &mut [f32]| {
-                        direct_weight_grad::weight_grad(&g, &xv, &dyv, dw, threads)
-                    };
+                    let run =
+                        |dw: &mut [f32]| direct_weight_grad::weight_grad(&g, &xv, &dyv, dw, on);
                     check("weight gradient", &dw_ref, &run)?;
                 }
             }
         }
     }
-    // Of the 34 (case, mode) pairs, 30 forwards are direct (not the pointwise one, left to
-    // gemm, nor the unpadded one at W 16, 14 output columns: narrower than a vector), 28
-    // input gradients (nor the unpadded circular 3×3s, whose adjoint needs a padding of 2
-    // that wraps another way, nor the circular stride-2 ones of 9 rows, not 2·H_out) and
-    // 32 weight gradients (all but the pointwise one), at 3 thread counts: the gates did
-    // not silently turn a kernel off.
-    assert_eq!(direct, (3 * 30, 3 * 28, 3 * 32));
+    // Of the 34 (case, mode) pairs, 30 forwards are direct on AVX-512 (not the pointwise one,
+    // left to gemm, nor the unpadded one at W 16, 14 output columns: narrower than its
+    // 16-lane vector; on AVX2, whose vectors hold 8, that one too: 32), 28 input gradients
+    // (nor the unpadded circular 3×3s, whose adjoint needs a padding of 2 that wraps another
+    // way, nor the circular stride-2 ones of 9 rows, not 2·H_out) and 32 weight gradients
+    // (all but the pointwise one), at 3 thread counts: the gates did not silently turn a
+    // kernel off.
+    let forwards = if family == SimdFamily::Avx2 { 32 } else { 30 };
+    assert_eq!(direct, (3 * forwards, 3 * 28, 3 * 32), "{family:?}");
     Ok(())
 }
 
 #[test]
-fn direct_conv_declines_what_it_does_not_compute() -> Result<()> {
+fn direct_kernels_decline_what_they_do_not_compute() -> Result<()> {
     let g = |x, w, spec| Geometry::new(x, w, spec);
-    // Strided input gradients with a phase row of 8 texels, a phase without a tap (1×1
-    // stride 2), a circular wrap of another period (H 9 ≠ 2·H_out); a row of 8 texels;
-    // circular padding that is not "same".
-    let strided = g((1, 2, 16, 16), (2, 2, 4, 4), Conv2dSpec::zeros(2, 1))?;
-    assert!(!strided_input_grad::supports(&strided));
-    let tapless = g((1, 2, 16, 64), (2, 2, 1, 1), Conv2dSpec::zeros(2, 0))?;
-    assert!(!strided_input_grad::supports(&tapless));
-    let odd_wrap = g((1, 2, 9, 64), (2, 2, 3, 3), Conv2dSpec::circular(2, 0))?;
-    assert!(!strided_input_grad::supports(&odd_wrap));
-    let narrow = g((1, 2, 8, 8), (2, 2, 3, 3), Conv2dSpec::circular(1, 1))?;
-    assert!(!direct_conv::supports_forward(&narrow) && !direct_conv::supports_input_grad(&narrow));
-    let wrapped = g((1, 2, 16, 16), (2, 2, 3, 3), Conv2dSpec::circular(1, 2))?;
-    assert!(direct_conv::input_grad_geometry(&wrapped).is_none());
-    // Pointwise: gemm reads x in place, nothing to gain.
-    let pointwise = g((1, 2, 16, 16), (2, 2, 1, 1), Conv2dSpec::zeros(1, 0))?;
+    for family in vector_families() {
+        let lanes = family.lanes();
+        // Strided input gradients with a phase row of half a vector, a phase without a tap
+        // (1×1 stride 2), a circular wrap of another period (H 9 ≠ 2·H_out); a row narrower
+        // than a vector; circular padding that is not "same".
+        let strided = g((1, 2, 16, lanes), (2, 2, 4, 4), Conv2dSpec::zeros(2, 1))?;
+        assert!(!strided_input_grad::supports(&strided, family));
+        let tapless = g((1, 2, 16, 64), (2, 2, 1, 1), Conv2dSpec::zeros(2, 0))?;
+        assert!(!strided_input_grad::supports(&tapless, family));
+        let odd_wrap = g((1, 2, 9, 64), (2, 2, 3, 3), Conv2dSpec::circular(2, 0))?;
+        assert!(!strided_input_grad::supports(&odd_wrap, family));
+        let narrow = g(
+            (1, 2, 8, lanes - 2),
+            (2, 2, 3, 3),
+            Conv2dSpec::circular(1, 1),
+        )?;
+        assert!(!direct_conv::supports_forward(&narrow, family));
+        assert!(!direct_conv::supports_input_grad(&narrow, family));
+        let wrapped = g((1, 2, 16, 16), (2, 2, 3, 3), Conv2dSpec::circular(1, 2))?;
+        assert!(direct_conv::input_grad_geometry(&wrapped, family).is_none());
+        // Pointwise: gemm reads x in place, nothing to gain.
+        let pointwise = g((1, 2, 16, 16), (2, 2, 1, 1), Conv2dSpec::zeros(1, 0))?;
+        assert!(
+            !direct_conv::supports_forward(&pointwise, family)
+                && !direct_conv::supports_input_grad(&pointwise, family)
+                && !direct_weight_grad::supports(&pointwise, family)
+        );
+    }
+    // The scalar family runs none of them.
+    let common = g((2, 4, 32, 32), (4, 4, 3, 3), Conv2dSpec::zeros(1, 1))?;
+    let strided = g((2, 4, 32, 32), (4, 4, 4, 4), Conv2dSpec::zeros(2, 1))?;
+    let scalar = SimdFamily::Scalar;
     assert!(
-        !direct_conv::supports_forward(&pointwise)
-            && !direct_conv::supports_input_grad(&pointwise)
-            && !direct_weight_grad::supports(&pointwise)
+        !direct_conv::supports_forward(&common, scalar)
+            && !direct_conv::supports_input_grad(&common, scalar)
+            && !strided_input_grad::supports(&strided, scalar)
+            && !direct_weight_grad::supports(&common, scalar)
     );
     Ok(())
 }

@@ -14,8 +14,9 @@
 //! `docs/neural-models.md`, "GAN training"), with no derivative w.r.t. the constant matrix.
 //!
 //! CPU tensors of dtype f32 and f64 take the sparse path, split over rayon above 65,536
-//! output elements; on AVX-512 the rows of an f32 width pass that repeat (the filters'
-//! interior, away from the edges) run 16 outputs per vector ([`crate::fir_simd`]). Other
+//! output elements; on a vector family ([`crate::simd`]) the rows of an f32 width pass that
+//! repeat (the filters' interior, away from the edges) run a vector of outputs at a time
+//! ([`crate::fir_simd`]). Other
 //! devices and dtypes, and every call inside
 //! [`crate::reference::with_reference_ops`], use [`separable_reference`]: dense matrices and
 //! candle's `matmul`, whose first and second derivatives are exact in candle 0.11
@@ -29,6 +30,7 @@ use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
 use crate::fir_simd::Periodic;
+use crate::simd::SimdFamily;
 
 use crate::threads::ELEMENTWISE_CHUNK as PARALLEL_ELEMENTS;
 
@@ -222,14 +224,12 @@ struct AxisPass {
 fn height_pass<T: candle_core::WithDType>(m: &AxisMatrix, x: &[T], w: usize, out: &mut [T]) {
     let weights = m.weights_as::<T>();
     let (n_in, n_out) = (m.n_in(), m.n_out());
-    let avx512 = crate::avx512::has_avx512();
-    let plane = |(o, x): (&mut [T], &[T])| {
-        if avx512 {
-            // SAFETY: AVX-512F was detected.
-            unsafe { height_plane_avx512(m, &weights, w, o, x) }
-        } else {
-            height_plane(m, &weights, w, o, x)
-        }
+    let family = SimdFamily::active();
+    let plane = |(o, x): (&mut [T], &[T])| match family {
+        // SAFETY: the family is one the CPU has (`SimdFamily::active`).
+        SimdFamily::Avx512 => unsafe { height_plane_avx512(m, &weights, w, o, x) },
+        SimdFamily::Avx2 => unsafe { height_plane_avx2(m, &weights, w, o, x) },
+        SimdFamily::Scalar => height_plane(m, &weights, w, o, x),
     };
     let (in_len, out_len) = (n_in * w, n_out * w);
     if out.len() < PARALLEL_ELEMENTS {
@@ -289,6 +289,22 @@ unsafe fn height_plane_avx512<T: candle_core::WithDType>(
     height_plane(m, weights, w, o, x)
 }
 
+/// [`height_plane`] compiled for AVX2 + FMA, 8 floats wide (no fused multiply-adds: Rust does
+/// not contract `a * b + c`, so every family rounds alike).
+///
+/// # Safety
+/// The CPU has AVX2 and FMA.
+#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
+unsafe fn height_plane_avx2<T: candle_core::WithDType>(
+    m: &AxisMatrix,
+    weights: &[T],
+    w: usize,
+    o: &mut [T],
+    x: &[T],
+) {
+    height_plane(m, weights, w, o, x)
+}
+
 /// Widest band [`width_pass`] runs as dense dot products: StyleGAN2's `[1, 3, 3, 1]`
 /// filter spans at most 4 input columns per output (blur, ×2 down) and its transposes 2–4.
 const MAX_BAND: usize = 8;
@@ -302,7 +318,7 @@ struct Band<T> {
     width: usize,
     first: Vec<usize>,
     weights: Vec<T>,
-    /// f32 rows that repeat, run 16 outputs per vector ([`crate::fir_simd`]).
+    /// f32 rows that repeat, run a vector of outputs at a time ([`crate::fir_simd`]).
     periodic: Option<Periodic>,
 }
 
@@ -339,7 +355,7 @@ impl<T: candle_core::WithDType> Band<T> {
         let periodic = (T::DTYPE == DType::F32)
             .then(|| {
                 let w32: Vec<f32> = weights.iter().map(|w| w.to_f64() as f32).collect();
-                Periodic::find(&first, &w32, width)
+                Periodic::find(&first, &w32, width, SimdFamily::active())
             })
             .flatten();
         Some(Self {
@@ -495,6 +511,7 @@ mod tests {
     use candle_core::Var;
 
     use super::*;
+    use crate::simd::with_simd_family;
     use crate::testing::max_abs_diff;
     use photomat_core::rng::pseudo_random;
 
@@ -581,8 +598,10 @@ mod tests {
         // StyleGAN2's [1, 3, 3, 1] / 8 with its real, equal weights in every row: blur
         // (period 1, shift 1), ×2 down (1, 2) and its transpose (2, 1), zero-padded and
         // wrapped, on even and odd lengths, rows of 9 to 65 outputs (a partial last vector,
-        // one and several vectors). On AVX-512 the periodic run must be found (else this
-        // tests nothing new) and the f32 pass must equal the dense f64 product.
+        // one and several vectors), on every kernel family this CPU runs (forced, so that an
+        // AVX-512 machine tests the AVX2 rows too). On a vector family the periodic run must
+        // be found (else this tests nothing new); on every family the f32 pass must equal
+        // the dense f64 product, and the scalar dot products to the bit.
         let dev = Device::Cpu;
         let taps = [1.0, 3.0, 3.0, 1.0].map(|t| t / 8.0);
         let filter = |n_out: usize, n_in: usize, step: usize, wrap: bool| {
@@ -602,7 +621,21 @@ mod tests {
                 .collect();
             AxisMatrix::from_rows(n_in, &rows).expect("valid rows")
         };
-        let avx512 = crate::avx512::has_avx512();
+        for family in SimdFamily::ALL
+            .into_iter()
+            .filter(|&f| f <= SimdFamily::detected())
+        {
+            with_simd_family(family, || periodic_case(family, &dev, &filter)).1?;
+        }
+        Ok(())
+    }
+
+    /// [`periodic_rows_match_the_dense_product`] on one kernel family.
+    fn periodic_case(
+        family: SimdFamily,
+        dev: &Device,
+        filter: &dyn Fn(usize, usize, usize, bool) -> AxisMatrix,
+    ) -> Result<()> {
         for n in [64, 40, 33, 20] {
             for wrap in [false, true] {
                 let blur = filter(n + 1, n, 1, wrap);
@@ -612,14 +645,15 @@ mod tests {
                 {
                     let case = format!("n {n} wrap {wrap} ({period}, {shift})");
                     let band = Band::<f32>::new(&m).expect("a band");
-                    if avx512 {
-                        let p = band.periodic.expect("a periodic run");
-                        assert_eq!((p.period, p.shift), (period, shift), "{case}");
+                    let case = format!("{family:?} {case}");
+                    match band.periodic {
+                        Some(p) => assert_eq!((p.period, p.shift), (period, shift), "{case}"),
+                        None => assert_eq!(family, SimdFamily::Scalar, "{case}: no periodic run"),
                     }
-                    let x = pseudo_random((2, 3, 5, m.n_in()), n as u64, DType::F64, &dev)?;
+                    let x = pseudo_random((2, 3, 5, m.n_in()), n as u64, DType::F64, dev)?;
                     let got =
                         axis_pass(&x.to_dtype(DType::F32)?, Arc::new(m.clone()), Axis::Width)?;
-                    let dense = m.to_dense(DType::F64, &dev)?;
+                    let dense = m.to_dense(DType::F64, dev)?;
                     let want = x
                         .reshape((30, m.n_in()))?
                         .matmul(&dense.t()?)?

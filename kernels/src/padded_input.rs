@@ -1,15 +1,15 @@
 //! The padded copy of an input the direct kernels read in place ([`crate::direct_conv`]'s
 //! forward, [`crate::direct_weight_grad`]): per channel, padded rows (zeros or wrapped texels,
 //! as the padding mode says), each stored as its `s` column phases for stride `s`, so that
-//! output texels `ox..ox+16` read 16 consecutive floats for every tap.
+//! the output texels of one vector read consecutive floats for every tap.
 
-use crate::avx512::{LANES, has_avx512, lane_mask};
 use crate::conv_geometry::Geometry;
+use crate::simd::{Kernel, Simd};
 
 /// Layout of a padded copy of `rows` consecutive padded rows of one image (all `Hp = H + 2p`
 /// or a band of them): per channel, each row the `s` phases of its `Wp = W + 2p` padded
 /// columns one after the other (column `j` at `(j mod s)·phase + j / s`), so that output
-/// texels `ox..ox+16` of a stride-`s` convolution read 16 consecutive floats for every tap.
+/// texels `ox..ox+L` of a stride-`s` convolution read `L` consecutive floats for every tap.
 #[derive(Clone, Copy)]
 pub(crate) struct Padded {
     /// Floats per phase: ⌈Wp / s⌉.
@@ -53,7 +53,7 @@ impl Padded {
 /// Copies padded rows `rows` (at most [`Padded::rows`] of them) of image `x` (C_in·H·W) into
 /// `xp` (C_in·[`Padded::plane`]), padded by zeros or wrapped. Floats of a row past its `Wp`
 /// columns (the last phase's tail) are zeros.
-pub(crate) fn pad_rows(
+pub(crate) fn pad_rows<S: Simd>(
     g: &Geometry,
     layout: Padded,
     x: &[f32],
@@ -89,7 +89,7 @@ pub(crate) fn pad_rows(
                             let hi = (p + g.w).saturating_sub(q).div_ceil(s).clamp(lo, out.len());
                             if lo < hi {
                                 let first = lo * s + q - p;
-                                strided_copy(&src[first..], s, &mut out[lo..hi]);
+                                strided_copy::<S>(&src[first..], s, &mut out[lo..hi]);
                             }
                             for t in (0..lo).chain(hi..out.len()) {
                                 out[t] = match cols.get(t * s + q) {
@@ -106,17 +106,17 @@ pub(crate) fn pad_rows(
 }
 
 /// `dst[i] = src[s·i]` for every element of `dst`: one column phase of a padded row. Stride
-/// 2 (every strided layer here) takes the even lanes of 32 floats per vector on AVX-512; the
+/// 2 (every strided layer here) takes the even lanes of two vectors' floats per vector; the
 /// scalar loop of other strides gathers one float at a time.
-fn strided_copy(src: &[f32], s: usize, dst: &mut [f32]) {
+fn strided_copy<S: Simd>(src: &[f32], s: usize, dst: &mut [f32]) {
     assert!(
         dst.is_empty() || s * (dst.len() - 1) < src.len(),
         "direct conv: strided copy past its row"
     );
-    #[cfg(target_arch = "x86_64")]
-    if s == 2 && has_avx512() {
-        // SAFETY: AVX-512F was detected; the assertion bounds every read.
-        unsafe { even_lanes_avx512(src, dst) };
+    if s == 2 {
+        // SAFETY: the CPU has S's features (the direct kernels' gate); the assertion bounds
+        // every read.
+        unsafe { S::vectorize(EvenLanes { src, dst }) };
         return;
     }
     for (d, v) in dst.iter_mut().zip(src.iter().step_by(s)) {
@@ -124,21 +124,31 @@ fn strided_copy(src: &[f32], s: usize, dst: &mut [f32]) {
     }
 }
 
-/// [`strided_copy`] with stride 2 on AVX-512.
-///
-/// # Safety
-/// AVX-512F is available and `2·(dst.len() − 1) < src.len()`.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn even_lanes_avx512(src: &[f32], dst: &mut [f32]) {
-    use std::arch::x86_64::*;
-    for i0 in (0..dst.len()).step_by(LANES) {
-        let lanes = LANES.min(dst.len() - i0);
-        // SAFETY: the loads read src[2·i0 ..][..2·lanes − 1], inside src by the contract; the
-        // masked store writes dst[i0 ..][..lanes].
-        unsafe {
-            let v = crate::avx512::load_even_lanes(src.as_ptr().add(2 * i0), lanes);
-            _mm512_mask_storeu_ps(dst.as_mut_ptr().add(i0), lane_mask(lanes), v);
+/// [`strided_copy`] with stride 2, as a [`Kernel`]: `2·(dst.len() − 1) < src.len()`.
+struct EvenLanes<'a> {
+    src: &'a [f32],
+    dst: &'a mut [f32],
+}
+
+impl Kernel for EvenLanes<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    unsafe fn run<S: Simd>(self) {
+        let Self { src, dst } = self;
+        for i0 in (0..dst.len()).step_by(S::LANES) {
+            let lanes = S::LANES.min(dst.len() - i0);
+            // SAFETY: the CPU has S's features; the loads read src[2·i0 ..][..2·lanes − 1],
+            // inside src by the contract; the store writes dst[i0 ..][..lanes].
+            unsafe {
+                let v = S::load_even(src.as_ptr().add(2 * i0), lanes);
+                let at = dst.as_mut_ptr().add(i0);
+                if lanes == S::LANES {
+                    S::store(at, v);
+                } else {
+                    S::store_masked(S::mask(lanes), at, v);
+                }
+            }
         }
     }
 }
