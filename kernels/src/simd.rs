@@ -357,11 +357,13 @@ mod x86 {
 
     impl Simd for Avx2 {
         const LANES: usize = 8;
-        // 4 × 3 = 12 accumulators + 3 inputs + 1 weight: the 16 registers.
-        const OC_BLOCK: usize = 4;
-        const TILE_VECTORS: usize = 3;
-        const WG_CHANNELS: usize = 4;
-        const WG_VECTORS: usize = 3;
+        // 5 × 2 = 10 accumulators + 2 inputs + 2 broadcast weights of 16 registers. 4 × 3
+        // (12 + 3 + 1, all 16) spilled an accumulator to the stack in every iteration: the
+        // compiler alternates two broadcast registers (docs/benchmarks/cpu-kernels.md).
+        const OC_BLOCK: usize = 5;
+        const TILE_VECTORS: usize = 2;
+        const WG_CHANNELS: usize = 5;
+        const WG_VECTORS: usize = 2;
         type V = __m256;
         type Mask = __m256i;
 
