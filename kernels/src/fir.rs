@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
 use crate::fir_simd::Periodic;
-use crate::simd::SimdFamily;
+use crate::simd::{Kernel, Simd, SimdFamily, on_family};
 
 use crate::threads::ELEMENTWISE_CHUNK as PARALLEL_ELEMENTS;
 
@@ -225,11 +225,13 @@ fn height_pass<T: candle_core::WithDType>(m: &AxisMatrix, x: &[T], w: usize, out
     let weights = m.weights_as::<T>();
     let (n_in, n_out) = (m.n_in(), m.n_out());
     let family = SimdFamily::active();
-    let plane = |(o, x): (&mut [T], &[T])| match family {
+    let plane = |(o, x): (&mut [T], &[T])| {
+        if family == SimdFamily::Scalar {
+            return height_plane(m, &weights, w, o, x);
+        }
+        let weights = &weights[..];
         // SAFETY: the family is one the CPU has (`SimdFamily::active`).
-        SimdFamily::Avx512 => unsafe { height_plane_avx512(m, &weights, w, o, x) },
-        SimdFamily::Avx2 => unsafe { height_plane_avx2(m, &weights, w, o, x) },
-        SimdFamily::Scalar => height_plane(m, &weights, w, o, x),
+        on_family!(family, S => unsafe { S::vectorize(HeightPlane { m, weights, w, o, x }) });
     };
     let (in_len, out_len) = (n_in * w, n_out * w);
     if out.len() < PARALLEL_ELEMENTS {
@@ -273,36 +275,24 @@ fn height_plane<T: candle_core::WithDType>(
     }
 }
 
-/// [`height_plane`] compiled for AVX-512: its row loops vectorise 16 floats wide rather than
-/// the baseline x86-64's 4. (A closure does not inherit a target feature, hence a function.)
-///
-/// # Safety
-/// The CPU has AVX-512F.
-#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx512f"))]
-unsafe fn height_plane_avx512<T: candle_core::WithDType>(
-    m: &AxisMatrix,
-    weights: &[T],
+/// [`height_plane`] as a [`Kernel`]: compiled for a vector family, its row loops vectorise
+/// 16 (AVX-512) or 8 (AVX2) floats wide rather than the baseline x86-64's 4, with no fused
+/// multiply-adds (Rust does not contract `a * b + c`), so every family rounds alike.
+struct HeightPlane<'a, T> {
+    m: &'a AxisMatrix,
+    weights: &'a [T],
     w: usize,
-    o: &mut [T],
-    x: &[T],
-) {
-    height_plane(m, weights, w, o, x)
+    o: &'a mut [T],
+    x: &'a [T],
 }
 
-/// [`height_plane`] compiled for AVX2 + FMA, 8 floats wide (no fused multiply-adds: Rust does
-/// not contract `a * b + c`, so every family rounds alike).
-///
-/// # Safety
-/// The CPU has AVX2 and FMA.
-#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx2,fma"))]
-unsafe fn height_plane_avx2<T: candle_core::WithDType>(
-    m: &AxisMatrix,
-    weights: &[T],
-    w: usize,
-    o: &mut [T],
-    x: &[T],
-) {
-    height_plane(m, weights, w, o, x)
+impl<T: candle_core::WithDType> Kernel for HeightPlane<'_, T> {
+    type Output = ();
+
+    #[inline(always)]
+    unsafe fn run<S: Simd>(self) {
+        height_plane(self.m, self.weights, self.w, self.o, self.x)
+    }
 }
 
 /// Widest band [`width_pass`] runs as dense dot products: StyleGAN2's `[1, 3, 3, 1]`

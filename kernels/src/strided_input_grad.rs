@@ -152,8 +152,10 @@ pub(crate) fn input_grad(
     dy: &[f32],
     w: &[f32],
     dx: &mut [f32],
-    (threads, family): (usize, SimdFamily),
+    on: (usize, SimdFamily),
 ) {
+    // Threads, and the family the CPU has (the caller's [`SimdFamily::active`]).
+    let (threads, family) = on;
     let (rows, cols) = plans(g, family).expect("direct conv: unsupported strided input gradient");
     // Padded dy bytes per phase row of dx.
     let row_bytes = 4 * g.co * cols.len;
