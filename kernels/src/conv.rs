@@ -11,14 +11,16 @@
 //! Each map runs on one of two kernel families, chosen here per call:
 //!
 //! - im2col + `gemm` ([`crate::im2col`]), the lowering to matrix products;
-//! - on CPUs with AVX-512, f32 convolutions other than pointwise ones run on the direct
-//!   kernels instead, which read a padded copy of the input in place rather than `col(x)`
-//!   (`docs/benchmarks.md`, "A direct convolution kernel"): forwards whose output rows are at
-//!   least 16 texels wide and the input gradients of such stride-1 convolutions
-//!   ([`crate::direct_conv`]), strided input gradients phase by phase
+//! - on CPUs with a vector family ([`crate::simd`]: AVX-512, or AVX2 + FMA), f32
+//!   convolutions other than pointwise ones run on the direct kernels instead, which read a
+//!   padded copy of the input in place rather than `col(x)` (`docs/benchmarks.md`, "A direct
+//!   convolution kernel"; `docs/benchmarks/cpu-kernels.md`): forwards whose output rows hold
+//!   at least one vector (16 texels on AVX-512, 8 on AVX2) and the input gradients of such
+//!   stride-1 convolutions ([`crate::direct_conv`]), strided input gradients phase by phase
 //!   ([`crate::strided_input_grad`]), and weight gradients over at least 1024 output texels
 //!   ([`crate::direct_weight_grad`]). Pointwise convolutions (whose `col(x)` is `x` itself),
-//!   narrow layers and f64 stay on im2col.
+//!   narrower layers and f64 stay on im2col. The family is the calling thread's
+//!   ([`crate::simd::SimdFamily::active`]), read once per op.
 //!
 //! CPU tensors of dtype f32 and f64 take this path; other devices and dtypes fall back to
 //! [`conv2d_reference`] (candle's `conv2d`, circular padding by `narrow` + `cat`), as does

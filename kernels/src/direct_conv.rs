@@ -1,6 +1,7 @@
-//! Direct convolution of f32 images on AVX-512: the forward and stride-1 input-gradient
-//! kernels of [`crate::conv`] for the layers that dominate the generator's, discriminator's and
-//! estimator's steps (3×3 and 4×4, strides 1 and 2).
+//! Direct convolution of f32 images on the SIMD families (AVX-512, AVX2 + FMA;
+//! [`crate::simd`]): the forward and stride-1 input-gradient kernels of [`crate::conv`] for
+//! the layers that dominate the generator's, discriminator's and estimator's steps (3×3 and
+//! 4×4, strides 1 and 2).
 //!
 //! im2col + `gemm` copies every input texel `kh·kw` times into `col(x)` and has `gemm` pack it
 //! again; here the input is copied once, into a padded plane per channel
@@ -9,11 +10,12 @@
 //! high-performance deep learning convolutions on SIMD architectures", SC 2018; oneDNN's
 //! direct kernels, which PyTorch CPU calls).
 //!
-//! **Forward.** With the activations kept in NCHW order, one AVX-512 vector holds 16
-//! consecutive output texels of one channel; a tile of output channels × vectors is summed
-//! over every input channel and kernel tap. The weights are repacked once per call so that
-//! a tile's weights of one (c, ky, kx) are adjacent. Output rows must hold at least one
-//! vector (`W_out ≥ 16`); a row's last, partial vector reads and writes only its lanes.
+//! **Forward.** With the activations kept in NCHW order, one vector holds consecutive output
+//! texels of one channel (16 on AVX-512, 8 on AVX2); a tile of output channels × vectors is
+//! summed over every input channel and kernel tap. The weights are repacked once per call so
+//! that a tile's weights of one (c, ky, kx) are adjacent. Output rows must hold at least one
+//! vector (`W_out ≥ 16` or `≥ 8`); a row's last, partial vector reads and writes only its
+//! lanes.
 //!
 //! **Input gradient.** That of a stride-1 convolution is itself such a convolution, of `dy`
 //! with the kernel flipped in both axes and its two channel axes swapped, padded by
@@ -22,10 +24,11 @@
 //! convolutions with sub-kernels, one per phase of the input grid
 //! ([`crate::strided_input_grad`]); weight gradients are [`crate::direct_weight_grad`]'s.
 //!
-//! Only f32 on CPUs with AVX-512F take this path, and not pointwise convolutions, which `gemm`
-//! already reads in place ([`supports_forward`], [`supports_input_grad`]); everything else
-//! stays on im2col + `gemm`, which the equivalence tests compare it with. Measurements:
-//! `docs/benchmarks.md`, "A direct convolution kernel".
+//! Only f32 on a vector family the CPU has takes this path, and not pointwise convolutions,
+//! which `gemm` already reads in place ([`supports_forward`], [`supports_input_grad`]);
+//! everything else stays on im2col + `gemm`, which the equivalence tests compare it with.
+//! Measurements: `docs/benchmarks.md`, "A direct convolution kernel";
+//! `docs/benchmarks/cpu-kernels.md`.
 
 use rayon::prelude::*;
 
