@@ -1,5 +1,5 @@
 //! The sizes of one 2-D convolution, checked once: stride, padding and padding mode
-//! ([`Conv2dSpec`], [`PaddingMode`]) and the [`Geometry`] every CPU path of [`crate::conv`]
+//! ([`Conv2dSpec`], [`PaddingMode`]) and the `Geometry` every CPU path of [`crate::conv`]
 //! reads (im2col + `gemm` in [`crate::im2col`], the direct kernels of
 //! [`crate::direct_conv`] and [`crate::strided_input_grad`]), with the one rule that maps a
 //! padded position back to an input texel (wrapped or zero).

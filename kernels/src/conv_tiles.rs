@@ -9,7 +9,7 @@
 //!
 //! (`L` lanes per vector) with one broadcast weight and one unaligned load per tile row and
 //! column (Georganas et al., "Anatomy of high-performance deep learning convolutions on SIMD
-//! architectures", SC 2018). Written once over [`Simd`]: a tile of `OC_BLOCK` output channels
+//! architectures", SC 2018). Written once over `Simd` ([`crate::simd`]): a tile of `OC_BLOCK` output channels
 //! × `TILE_VECTORS` vectors fills the family's registers (6 × 4 of AVX-512's 32, 5 × 2 of
 //! AVX2's 16, with the input vectors and the weight); a row's last, partial vector reads and
 //! writes only its lanes.

@@ -25,7 +25,7 @@
 //! ([`crate::strided_input_grad`]); weight gradients are [`crate::direct_weight_grad`]'s.
 //!
 //! Only f32 on a vector family the CPU has takes this path, and not pointwise convolutions,
-//! which `gemm` already reads in place ([`supports_forward`], [`supports_input_grad`]);
+//! which `gemm` already reads in place (`supports_forward`, `supports_input_grad`);
 //! everything else stays on im2col + `gemm`, which the equivalence tests compare it with.
 //! Measurements: `docs/benchmarks.md`, "A direct convolution kernel";
 //! `docs/benchmarks/cpu-kernels.md`.

@@ -1,10 +1,10 @@
 //! The direct weight gradient of f32 convolutions ([`crate::conv`]'s choice for weight
-//! gradients over at least [`WG_MIN_TEXELS`] output texels): a reduction over texels whose
+//! gradients over at least `WG_MIN_TEXELS` output texels): a reduction over texels whose
 //! vector lanes run over output channels, `dy` copied channels-last one L1-sized band of rows
 //! at a time, and a tile of `WG_VECTORS` vectors of output channels × `WG_CHANNELS` input
 //! channels of one tap adding `dy` rows times broadcast input texels, its sums kept
 //! channels-last between bands and transposed once (the scheme of Georganas et al., SC 2018,
-//! for the weight-update pass). Written once over [`Simd`] (6 × 4 tiles on AVX-512, 5 × 2 on
+//! for the weight-update pass). Written once over `Simd` (6 × 4 tiles on AVX-512, 5 × 2 on
 //! AVX2); it reads the padded input of [`crate::padded_input`].
 
 use rayon::prelude::*;

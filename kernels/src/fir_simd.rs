@@ -16,7 +16,7 @@
 //! is, per tap, one multiply-add of a vector of consecutive `m` at a time: shift 1 reads
 //! consecutive floats, shift 2 the even lanes of two vectors' worth, and period 2 interleaves
 //! its two phases' vectors into twice as many consecutive outputs. Written once over
-//! [`Simd`]. The rows
+//! `Simd`. The rows
 //! are short (17–65 outputs in the discriminator), so nothing is allocated per row and the
 //! last vector is masked. Slice loops the compiler vectorised on its own were slower than
 //! the scalar dot products (`docs/benchmarks.md`, "Strided input gradients on the direct

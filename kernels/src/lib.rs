@@ -35,7 +35,7 @@
 //!   ([`plane_ops`]).
 //! - [`noise_bias_leaky_relu_gain`]: a synthesis layer's epilogue (noise, bias, LeakyReLU ×
 //!   gain) as one element-wise pass each way ([`noise_act`]).
-//! - [`reference`]: a per-thread switch sending every op to its candle reference composition
+//! - [`mod@reference`]: a per-thread switch sending every op to its candle reference composition
 //!   (equivalence tests, same-process baselines).
 //! - [`simd`]: the vector families the hand-written kernels are compiled for (AVX-512,
 //!   AVX2 + FMA), the one that runs (the CPU's widest; `PHOTOMAT_SIMD=avx2|avx512|scalar`

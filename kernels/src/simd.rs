@@ -3,7 +3,7 @@
 //!
 //! The direct convolutions ([`crate::direct_conv`], [`crate::strided_input_grad`],
 //! [`crate::direct_weight_grad`]), the padded input copy ([`crate::padded_input`]) and the FIR
-//! passes ([`crate::fir`], [`crate::fir_simd`]) are written once, over the [`Simd`] trait of
+//! passes ([`crate::fir`], [`crate::fir_simd`]) are written once, over the `Simd` trait of
 //! this module, and compiled for each family:
 //!
 //! - [`SimdFamily::Avx512`]: AVX-512F, 16 f32 lanes, 32 vector registers, lane masks;
@@ -12,8 +12,8 @@
 //! - [`SimdFamily::Scalar`]: no hand-written vector kernels (convolutions on im2col + `gemm`,
 //!   the FIR passes' scalar loops), the path of other CPUs.
 //!
-//! A kernel is a [`Kernel`] whose `run::<S>()` is inlined into one function per family
-//! compiled with that family's target features ([`Simd::vectorize`]): the same pattern as the
+//! A kernel is a `Kernel` whose `run::<S>()` is inlined into one function per family
+//! compiled with that family's target features (`Simd::vectorize`): the same pattern as the
 //! `pulp` crate's `WithSimd`, which `gemm` builds on. pulp itself is not used: its masked
 //! loads and stores jump through an assembly table with fixed registers, and the tiles here
 //! mask a row's last vector in their innermost loop.
