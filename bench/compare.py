@@ -20,6 +20,13 @@ cases also show GFLOP/s and the share of the sgemm ceiling: the faster of the tw
 Before timing, it checks that both sides built networks with exactly the same parameter
 counts (G, its buffers, M, D, E) and stops if not. Raw reports go to `--out` (JSON).
 
+With `--isa avx2` both sides are kept to AVX2 + FMA on a CPU that has AVX-512, to emulate an
+AVX2-only machine: photomat with PHOTOMAT_SIMD=avx2 (its direct kernels; give `--photomat` a
+binary built without gemm's `x86-v4` feature to keep its GEMMs off AVX-512 too, which gemm
+cannot be told at run time), PyTorch with ATEN_CPU_CAPABILITY=avx2,
+MKL_ENABLE_INSTRUCTIONS=AVX2 and ONEDNN_MAX_CPU_ISA=AVX2. The header names the CPU, its vector
+flags and what each side says it ran.
+
 PyTorch runs with OMP_WAIT_POLICY=PASSIVE unless `--omp-wait-policy ACTIVE`: libgomp's
 default spin-waiting made a 2-thread PyTorch 1.4-7.5x slower while other jobs shared the two
 cores (build machine, load average 12: E step 5.4 s ACTIVE vs 0.72 s PASSIVE, conv3x3 1.34
@@ -42,6 +49,15 @@ VENV_PYTHON = os.path.join(ROOT, "bench", "pytorch", ".venv", "bin", "python")
 SCRIPT = os.path.join(ROOT, "bench", "pytorch", "bench_steps.py")
 PHOTOMAT = os.path.join(ROOT, "target", "release", "photomat")
 DEFAULT_CONFIGS = "64:all;256:sample,e_step"
+#: --isa → (photomat's environment, PyTorch's environment).
+ISA_ENV = {
+    "native": ({}, {}),
+    "avx2": ({"PHOTOMAT_SIMD": "avx2"},
+             {"ATEN_CPU_CAPABILITY": "avx2", "MKL_ENABLE_INSTRUCTIONS": "AVX2",
+              "ONEDNN_MAX_CPU_ISA": "AVX2"}),
+}
+#: The /proc/cpuinfo flags a table reports: which kernel families the CPU could run.
+VECTOR_FLAGS = ("avx512f", "avx512bw", "avx512vl", "avx512_vnni", "avx2", "fma", "avx")
 
 
 def parse_args():
@@ -61,6 +77,12 @@ def parse_args():
                    help="also run photomat on plain candle (photomat bench --candle-reference)")
     p.add_argument("--skip-build", action="store_true",
                    help="use the existing target/release/photomat")
+    p.add_argument("--photomat", default=None,
+                   help="photomat binary to time (implies --skip-build; default: "
+                        "target/release/photomat)")
+    p.add_argument("--isa", default="native", choices=sorted(ISA_ENV),
+                   help="instruction set both sides may use (default native: the CPU's "
+                        "widest); avx2 emulates an AVX2-only machine on an AVX-512 one")
     p.add_argument("--out", default=os.path.join(ROOT, "target", "bench"),
                    help="folder for the raw JSON reports")
     a = p.parse_args()
@@ -85,13 +107,16 @@ def run_side(side, threads, size, cases, a, photomat):
     if cases:
         common += ["--cases", cases]
     env = dict(os.environ)
+    ours, theirs = ISA_ENV[a.isa]
     if side in ("photomat", "candle"):
         cmd = [photomat, "bench"] + common + (["--candle-reference"] if side == "candle" else [])
         env["RAYON_NUM_THREADS"] = str(threads)
+        env.update(ours)
     else:
         cmd = [VENV_PYTHON, SCRIPT, "--threads", str(threads)] + common
         env["OMP_NUM_THREADS"] = env["MKL_NUM_THREADS"] = str(threads)
         env["OMP_WAIT_POLICY"] = a.omp_wait_policy
+        env.update(theirs)
     before = load()
     start = time.time()
     done = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -104,6 +129,22 @@ def run_side(side, threads, size, cases, a, photomat):
     if report["threads"] != threads:
         sys.exit(f"{side} ran with {report['threads']} threads, {threads} requested")
     return report
+
+
+def cpu():
+    """(model name, the vector flags of VECTOR_FLAGS it has) from /proc/cpuinfo."""
+    model, flags = "unknown CPU", set()
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                key, _, value = line.partition(":")
+                if key.strip() == "model name" and model == "unknown CPU":
+                    model = value.strip()
+                elif key.strip() == "flags" and not flags:
+                    flags = set(value.split())
+    except OSError:
+        pass
+    return model, [f for f in VECTOR_FLAGS if f in flags]
 
 
 def check_parameters(reports):
@@ -163,7 +204,7 @@ def table(results):
 
 def main():
     a = parse_args()
-    if not a.skip_build:
+    if not a.skip_build and not a.photomat:
         subprocess.run(["cargo", "build", "--release", "-p", "photomat-cli"], cwd=ROOT,
                        check=True)
     if not os.path.exists(VENV_PYTHON):
@@ -172,12 +213,16 @@ def main():
     stamp = time.strftime("%Y%m%d-%H%M%S")
     # A private copy: other builds in the same tree cannot swap the binary between rounds.
     photomat = os.path.join(a.out, f"photomat-{stamp}")
-    shutil.copy2(PHOTOMAT, photomat)
+    shutil.copy2(a.photomat or PHOTOMAT, photomat)
     everything = {}
     commit = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT,
                             stdout=subprocess.PIPE, text=True).stdout.strip()
-    print(f"machine: {os.cpu_count()} CPUs, load {load()}; photomat built at {commit}",
-          flush=True)
+    model, flags = cpu()
+    ours, theirs = ISA_ENV[a.isa]
+    caps = ", ".join(f"{k}={v}" for k, v in {**ours, **theirs}.items()) or "none"
+    print(f"machine: {model}, {os.cpu_count()} CPUs, CPU flags {' '.join(flags) or 'none'}, "
+          f"load {load()}; photomat {a.photomat or 'built'} at {commit}; --isa {a.isa} "
+          f"(caps: {caps})", flush=True)
     for threads in a.threads:
         results = []
         for size, cases in a.configs:
@@ -192,8 +237,11 @@ def main():
         everything[str(threads)] = [
             {"size": s, "cases": c, "reports": r} for (s, c), r in results]
         first = results[0][1]
-        print(f"\n### {threads} thread(s): {first['photomat'][0]['version']} vs PyTorch "
-              f"{first['pytorch'][0]['version']} (OMP_WAIT_POLICY={a.omp_wait_policy}), "
+        print(f"\n### {threads} thread(s): {first['photomat'][0]['version']} (kernels "
+              f"{first['photomat'][0].get('kernels', '?')}) vs PyTorch "
+              f"{first['pytorch'][0]['version']} (CPU capability "
+              f"{first['pytorch'][0].get('cpu_capability', '?')}, "
+              f"OMP_WAIT_POLICY={a.omp_wait_policy}), {model} ({' '.join(flags)}), "
               f"multiplier {a.multiplier}, "
               f"{a.rounds} rounds × {a.iters} iterations (+{a.warmup} warm-up)\n")
         print(table(results), flush=True)

@@ -26,6 +26,10 @@ sys.dont_write_bytecode = True  # keep bench/pytorch free of __pycache__ (nothin
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 import models  # noqa: E402
 
+#: The environment variables that cap the instruction set of ATen's kernels, MKL (GEMMs) and
+#: oneDNN (convolutions): `bench/compare.py --isa avx2` sets all three.
+ISA_CAPS = ("ATEN_CPU_CAPABILITY", "MKL_ENABLE_INSTRUCTIONS", "ONEDNN_MAX_CPU_ISA")
+
 #: name -> what it measures (same text as the Rust side's case table).
 CASES = {
     "g_step": "G+M forward, frozen D on the fakes, softplus(-D) loss, backward (G and M gradients)",
@@ -249,6 +253,10 @@ def main(argv=None):
         "version": torch.__version__,
         "threads": torch.get_num_threads(),
         "platform": f"{platform.machine()} python {platform.python_version()}",
+        # The kernels ATen dispatches to (AVX512, AVX2, …: ATEN_CPU_CAPABILITY caps it) and the
+        # caps MKL and oneDNN were given, so that a table says which instruction set ran.
+        "cpu_capability": torch.backends.cpu.get_cpu_capability(),
+        "isa_caps": {k: os.environ[k] for k in ISA_CAPS if k in os.environ},
         "size": a.size,
         "multiplier": a.multiplier,
         "batch": a.batch,

@@ -14,6 +14,9 @@
 //! variant, the order alternating; medians of the per-round medians and of the per-round
 //! ratios.
 
+mod common;
+use common::{alternate, median, setup};
+
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -47,21 +50,8 @@ fn pass(fused: bool, x: &Var, bias: Option<&Var>, g: &Tensor) -> Result<()> {
     Ok(())
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() -> Result<()> {
-    println!(
-        "threads: {}; allocator: {}",
-        photomat_kernels::alloc::thread_count(),
-        if cfg!(feature = "mimalloc") {
-            "mimalloc"
-        } else {
-            "system"
-        }
-    );
+    println!("{}", setup());
     println!("| x shape | bias | composite (ms) | fused (ms) | composite ÷ fused |");
     println!("|---------|------|---------------:|-----------:|------------------:|");
     // G's activations at 128² (128 channels) and 256² (64 channels), batch 4; M's hidden
@@ -85,13 +75,7 @@ fn main() -> Result<()> {
                 }
                 Ok(median(t))
             };
-            let (c, f) = if round % 2 == 0 {
-                let c = time(false)?;
-                (c, time(true)?)
-            } else {
-                let f = time(true)?;
-                (time(false)?, f)
-            };
+            let (c, f) = alternate(round, || time(false), || time(true))?;
             comp.push(c);
             fused.push(f);
             ratio.push(c / f);

@@ -20,6 +20,9 @@
 //! loss `Σ y²`, then `loss.backward()`: ≈ 15 element-wise ops of the input's size, each
 //! allocating its output.
 
+mod common;
+use common::{alternate, median};
+
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::hint::black_box;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -108,11 +111,6 @@ fn pass(x: &Var, bias: &Tensor) -> Result<()> {
     Ok(())
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() -> Result<()> {
     const ROUNDS: usize = 7;
     const PASSES: usize = 5;
@@ -142,13 +140,7 @@ fn main() -> Result<()> {
                 }
                 Ok(median(t))
             };
-            let (s, m) = if round % 2 == 0 {
-                let s = time(false)?;
-                (s, time(true)?)
-            } else {
-                let m = time(true)?;
-                (time(false)?, m)
-            };
+            let (s, m) = alternate(round, || time(false), || time(true))?;
             sys.push(s);
             mi.push(m);
             ratios.push(s / m);

@@ -25,6 +25,9 @@
 //! (input and weight gradients cost one forward each). Threads: candle's and ours follow
 //! `RAYON_NUM_THREADS`, else the physical core count (`photomat_kernels::alloc`).
 
+mod common;
+use common::{alternate, median, setup};
+
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
@@ -65,44 +68,28 @@ const CASES: &[Case] = &[
         x: (4, 64, 128, 128),
         c_out: 64,
         k: 3,
-        spec: Conv2dSpec {
-            stride: 1,
-            padding: 1,
-            mode: photomat_kernels::PaddingMode::Zeros,
-        },
+        spec: Conv2dSpec::zeros(1, 1),
     },
     Case {
         name: "3x3_64to64_128px_b4_circular",
         x: (4, 64, 128, 128),
         c_out: 64,
         k: 3,
-        spec: Conv2dSpec {
-            stride: 1,
-            padding: 1,
-            mode: photomat_kernels::PaddingMode::Circular,
-        },
+        spec: Conv2dSpec::circular(1, 1),
     },
     Case {
         name: "4x4s2_64to64_128px_b4",
         x: (4, 64, 128, 128),
         c_out: 64,
         k: 4,
-        spec: Conv2dSpec {
-            stride: 2,
-            padding: 1,
-            mode: photomat_kernels::PaddingMode::Zeros,
-        },
+        spec: Conv2dSpec::zeros(2, 1),
     },
     Case {
         name: "1x1_64to64_128px_b4",
         x: (4, 64, 128, 128),
         c_out: 64,
         k: 1,
-        spec: Conv2dSpec {
-            stride: 1,
-            padding: 0,
-            mode: photomat_kernels::PaddingMode::Zeros,
-        },
+        spec: Conv2dSpec::zeros(1, 0),
     },
 ];
 
@@ -164,11 +151,6 @@ fn criterion_runs(c: &mut Criterion) -> Result<()> {
     Ok(())
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Seconds per call of `f`, median of `n` calls.
 fn time(n: usize, mut f: impl FnMut() -> Result<()>) -> Result<f64> {
     let mut t = Vec::with_capacity(n);
@@ -201,13 +183,9 @@ fn summary() -> Result<()> {
     const ROUNDS: usize = 5;
     let sgemm = sgemm_operands()?;
     println!(
-        "\nthreads: {}; allocator: {}; sgemm ceiling: 1024² f32 matmul, timed in every round",
-        photomat_kernels::alloc::thread_count(),
-        if cfg!(feature = "mimalloc") {
-            "mimalloc"
-        } else {
-            "system"
-        }
+        "
+{}; sgemm ceiling: 1024² f32 matmul, timed in every round",
+        setup()
     );
     println!(
         "| case | pass | ours (ms) | candle (ms) | ours GFLOP/s | candle GFLOP/s | sgemm GFLOP/s | ours % of sgemm | candle ÷ ours |"
@@ -231,13 +209,11 @@ fn summary() -> Result<()> {
             let mut ceiling = Vec::new();
             for round in 0..ROUNDS {
                 ceiling.push(sgemm_gflops(&sgemm)?);
-                let (o, c) = if round % 2 == 0 {
-                    let o = time(1, || run(conv2d))?;
-                    (o, time(1, || run(conv2d_reference))?)
-                } else {
-                    let c = time(1, || run(conv2d_reference))?;
-                    (time(1, || run(conv2d))?, c)
-                };
+                let (o, c) = alternate(
+                    round,
+                    || time(1, || run(conv2d)),
+                    || time(1, || run(conv2d_reference)),
+                )?;
                 ours.push(o);
                 theirs.push(c);
                 ratios.push(c / o);

@@ -17,6 +17,9 @@
 //! One pass: forward on `Var`s, `Σ y ⊙ g`, `backward()` to input and weight. 5 rounds, the
 //! order alternating; medians of the times and of the per-round ratios.
 
+mod common;
+use common::{alternate, median, setup};
+
 use std::hint::black_box;
 use std::time::Instant;
 
@@ -44,22 +47,9 @@ fn pass(new: bool, x: &Var, w: &Var, g: &Tensor, k: usize, s: usize) -> Result<(
     Ok(())
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() -> Result<()> {
     let dev = Device::Cpu;
-    println!(
-        "threads: {}; allocator: {}",
-        photomat_kernels::alloc::thread_count(),
-        if cfg!(feature = "mimalloc") {
-            "mimalloc"
-        } else {
-            "system"
-        }
-    );
+    println!("{}", setup());
     println!("| layer | previous (ms) | new (ms) | previous ÷ new |");
     println!("|-------|--------------:|---------:|---------------:|");
     // (name, (B, C_in, H = W), C_out, k, stride): E's first encoder block (4×4 s2 and 3×3 at
@@ -83,13 +73,7 @@ fn main() -> Result<()> {
                 pass(use_new, &x, &w, &g, k, s)?;
                 Ok(start.elapsed().as_secs_f64() * 1e3)
             };
-            let (p, n) = if round % 2 == 0 {
-                let p = time(false)?;
-                (p, time(true)?)
-            } else {
-                let n = time(true)?;
-                (time(false)?, n)
-            };
+            let (p, n) = alternate(round, || time(false), || time(true))?;
             prev.push(p);
             new.push(n);
             ratio.push(p / n);

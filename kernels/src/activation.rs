@@ -22,6 +22,8 @@ use candle_core::{CpuStorage, CustomOp1, CustomOp2, Layout, Result, Shape, Tenso
 use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
+use crate::bias::channel_sums;
+use crate::storage::contiguous;
 
 use crate::threads::ELEMENTWISE_CHUNK as CHUNK;
 
@@ -159,30 +161,36 @@ impl CustomOp2 for BiasLeakyRelu {
         &self,
         x: &CpuStorage,
         lx: &Layout,
-        b: &CpuStorage,
-        lb: &Layout,
+        bias: &CpuStorage,
+        l_bias: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let dims = lx.shape().dims();
-        if dims.len() < 2 || lb.shape().dims() != [dims[1]] {
+        if dims.len() < 2 || l_bias.shape().dims() != [dims[1]] {
             bail!(
                 "bias-leaky-relu: bias {:?} does not fit x {dims:?}",
-                lb.shape()
+                l_bias.shape()
             );
         }
         let inner: usize = dims[2..].iter().product();
-        let out = match (x, b) {
-            (CpuStorage::F32(x), CpuStorage::F32(b)) => {
-                let (x, b) = (slice(x, lx, self.name())?, slice(b, lb, self.name())?);
-                CpuStorage::F32(self.run(x, b, inner.max(1)))
+        let out = match (x, bias) {
+            (CpuStorage::F32(x), CpuStorage::F32(bias)) => {
+                let (x, bias) = (
+                    contiguous(x, lx, self.name())?,
+                    contiguous(bias, l_bias, self.name())?,
+                );
+                CpuStorage::F32(self.run(x, bias, inner.max(1)))
             }
-            (CpuStorage::F64(x), CpuStorage::F64(b)) => {
-                let (x, b) = (slice(x, lx, self.name())?, slice(b, lb, self.name())?);
-                CpuStorage::F64(self.run(x, b, inner.max(1)))
+            (CpuStorage::F64(x), CpuStorage::F64(bias)) => {
+                let (x, bias) = (
+                    contiguous(x, lx, self.name())?,
+                    contiguous(bias, l_bias, self.name())?,
+                );
+                CpuStorage::F64(self.run(x, bias, inner.max(1)))
             }
-            (x, b) => bail!(
+            (x, bias) => bail!(
                 "bias-leaky-relu: unsupported dtypes {:?}, {:?}",
                 x.dtype(),
-                b.dtype()
+                bias.dtype()
             ),
         };
         Ok((out, lx.shape().clone()))
@@ -205,17 +213,9 @@ impl CustomOp2 for BiasLeakyRelu {
         // The mask is constant (zero derivative): detached, so that a second backward does
         // not wait for a gradient of y that no op provides.
         let dz = op.apply(grad, &y.detach())?;
-        // Each plane summed contiguously, split over rayon ([`crate::channel_sums`]).
-        let dbias = crate::channel_sums(&dz)?;
+        // Each plane summed contiguously, split over rayon ([`channel_sums`]).
+        let dbias = channel_sums(&dz)?;
         Ok((Some(dz), Some(dbias)))
-    }
-}
-
-/// The contiguous slice a layout describes, or an error naming the op.
-pub(crate) fn slice<'a, T>(v: &'a [T], layout: &Layout, op: &str) -> Result<&'a [T]> {
-    match layout.contiguous_offsets() {
-        Some((start, end)) => Ok(&v[start..end]),
-        None => bail!("{op}: expected a contiguous tensor"),
     }
 }
 
@@ -233,7 +233,7 @@ impl CustomOp1 for LeakyRelu {
         let out = match s {
             CpuStorage::F32(v) => {
                 let (p, n) = (self.gain as f32, (self.gain * self.slope) as f32);
-                let v = slice(v, l, self.name())?;
+                let v = contiguous(v, l, self.name())?;
                 CpuStorage::F32(
                     v.iter()
                         .map(|&x| if x > 0.0 { p * x } else { n * x })
@@ -242,7 +242,7 @@ impl CustomOp1 for LeakyRelu {
             }
             CpuStorage::F64(v) => {
                 let (p, n) = (self.gain, self.gain * self.slope);
-                let v = slice(v, l, self.name())?;
+                let v = contiguous(v, l, self.name())?;
                 CpuStorage::F64(
                     v.iter()
                         .map(|&x| if x > 0.0 { p * x } else { n * x })
@@ -299,12 +299,18 @@ impl CustomOp2 for LeakyReluGrad {
         let out = match (g, x) {
             (CpuStorage::F32(g), CpuStorage::F32(x)) => {
                 let (p, n) = (self.gain as f32, (self.gain * self.slope) as f32);
-                let (g, x) = (slice(g, lg, self.name())?, slice(x, lx, self.name())?);
+                let (g, x) = (
+                    contiguous(g, lg, self.name())?,
+                    contiguous(x, lx, self.name())?,
+                );
                 CpuStorage::F32(zip_map(g, x, |g, x| if x > 0.0 { p * g } else { n * g }))
             }
             (CpuStorage::F64(g), CpuStorage::F64(x)) => {
                 let (p, n) = (self.gain, self.gain * self.slope);
-                let (g, x) = (slice(g, lg, self.name())?, slice(x, lx, self.name())?);
+                let (g, x) = (
+                    contiguous(g, lg, self.name())?,
+                    contiguous(x, lx, self.name())?,
+                );
                 CpuStorage::F64(zip_map(g, x, |g, x| if x > 0.0 { p * g } else { n * g }))
             }
             (g, x) => bail!(

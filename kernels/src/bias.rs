@@ -20,8 +20,8 @@ use candle_core::{
 };
 use rayon::prelude::*;
 
-use crate::activation::slice;
 use crate::plane_ops::{fast_path, leading_dims, map_planes, plane_len};
+use crate::storage::contiguous;
 
 use crate::threads::ELEMENTWISE_CHUNK as CHUNK;
 
@@ -112,12 +112,16 @@ impl CustomOp2 for AddChannelBias {
             bail!("{name}: bias {:?} does not fit {c} channels", lb.shape());
         }
         let out = match (x, b) {
-            (CpuStorage::F32(x), CpuStorage::F32(b)) => {
-                CpuStorage::F32(Self::run(slice(x, lx, name)?, slice(b, lb, name)?, plane))
-            }
-            (CpuStorage::F64(x), CpuStorage::F64(b)) => {
-                CpuStorage::F64(Self::run(slice(x, lx, name)?, slice(b, lb, name)?, plane))
-            }
+            (CpuStorage::F32(x), CpuStorage::F32(b)) => CpuStorage::F32(Self::run(
+                contiguous(x, lx, name)?,
+                contiguous(b, lb, name)?,
+                plane,
+            )),
+            (CpuStorage::F64(x), CpuStorage::F64(b)) => CpuStorage::F64(Self::run(
+                contiguous(x, lx, name)?,
+                contiguous(b, lb, name)?,
+                plane,
+            )),
             _ => bail!("{name}: operands must both be f32 or both f64"),
         };
         Ok((out, lx.shape().clone()))
@@ -162,8 +166,8 @@ impl CustomOp1 for ChannelSums {
     fn cpu_fwd(&self, x: &CpuStorage, lx: &Layout) -> Result<(CpuStorage, Shape)> {
         let (name, dims) = (self.name(), planes(lx));
         let out = match x {
-            CpuStorage::F32(x) => CpuStorage::F32(Self::run(slice(x, lx, name)?, dims)),
-            CpuStorage::F64(x) => CpuStorage::F64(Self::run(slice(x, lx, name)?, dims)),
+            CpuStorage::F32(x) => CpuStorage::F32(Self::run(contiguous(x, lx, name)?, dims)),
+            CpuStorage::F64(x) => CpuStorage::F64(Self::run(contiguous(x, lx, name)?, dims)),
             _ => bail!("{name}: expected f32 or f64"),
         };
         Ok((out, Shape::from(dims.1)))

@@ -14,8 +14,9 @@
 //! `docs/neural-models.md`, "GAN training"), with no derivative w.r.t. the constant matrix.
 //!
 //! CPU tensors of dtype f32 and f64 take the sparse path, split over rayon above 65,536
-//! output elements; on AVX-512 the rows of an f32 width pass that repeat (the filters'
-//! interior, away from the edges) run 16 outputs per vector ([`crate::fir_simd`]). Other
+//! output elements; on a vector family ([`crate::simd`]) the rows of an f32 width pass that
+//! repeat (the filters' interior, away from the edges) run a vector of outputs at a time
+//! ([`crate::fir_simd`]). Other
 //! devices and dtypes, and every call inside
 //! [`crate::reference::with_reference_ops`], use [`separable_reference`]: dense matrices and
 //! candle's `matmul`, whose first and second derivatives are exact in candle 0.11
@@ -29,6 +30,7 @@ use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
 use crate::fir_simd::Periodic;
+use crate::simd::{Kernel, Simd, SimdFamily, on_family};
 
 use crate::threads::ELEMENTWISE_CHUNK as PARALLEL_ELEMENTS;
 
@@ -222,14 +224,14 @@ struct AxisPass {
 fn height_pass<T: candle_core::WithDType>(m: &AxisMatrix, x: &[T], w: usize, out: &mut [T]) {
     let weights = m.weights_as::<T>();
     let (n_in, n_out) = (m.n_in(), m.n_out());
-    let avx512 = crate::avx512::has_avx512();
+    let family = SimdFamily::active();
     let plane = |(o, x): (&mut [T], &[T])| {
-        if avx512 {
-            // SAFETY: AVX-512F was detected.
-            unsafe { height_plane_avx512(m, &weights, w, o, x) }
-        } else {
-            height_plane(m, &weights, w, o, x)
+        if family == SimdFamily::Scalar {
+            return height_plane(m, &weights, w, o, x);
         }
+        let weights = &weights[..];
+        // SAFETY: the family is one the CPU has (`SimdFamily::active`).
+        on_family!(family, S => unsafe { S::vectorize(HeightPlane { m, weights, w, o, x }) });
     };
     let (in_len, out_len) = (n_in * w, n_out * w);
     if out.len() < PARALLEL_ELEMENTS {
@@ -273,20 +275,24 @@ fn height_plane<T: candle_core::WithDType>(
     }
 }
 
-/// [`height_plane`] compiled for AVX-512: its row loops vectorise 16 floats wide rather than
-/// the baseline x86-64's 4. (A closure does not inherit a target feature, hence a function.)
-///
-/// # Safety
-/// The CPU has AVX-512F.
-#[cfg_attr(target_arch = "x86_64", target_feature(enable = "avx512f"))]
-unsafe fn height_plane_avx512<T: candle_core::WithDType>(
-    m: &AxisMatrix,
-    weights: &[T],
+/// [`height_plane`] as a [`Kernel`]: compiled for a vector family, its row loops vectorise
+/// 16 (AVX-512) or 8 (AVX2) floats wide rather than the baseline x86-64's 4, with no fused
+/// multiply-adds (Rust does not contract `a * b + c`), so every family rounds alike.
+struct HeightPlane<'a, T> {
+    m: &'a AxisMatrix,
+    weights: &'a [T],
     w: usize,
-    o: &mut [T],
-    x: &[T],
-) {
-    height_plane(m, weights, w, o, x)
+    o: &'a mut [T],
+    x: &'a [T],
+}
+
+impl<T: candle_core::WithDType> Kernel for HeightPlane<'_, T> {
+    type Output = ();
+
+    #[inline(always)]
+    unsafe fn run<S: Simd>(self) {
+        height_plane(self.m, self.weights, self.w, self.o, self.x)
+    }
 }
 
 /// Widest band [`width_pass`] runs as dense dot products: StyleGAN2's `[1, 3, 3, 1]`
@@ -302,7 +308,7 @@ struct Band<T> {
     width: usize,
     first: Vec<usize>,
     weights: Vec<T>,
-    /// f32 rows that repeat, run 16 outputs per vector ([`crate::fir_simd`]).
+    /// f32 rows that repeat, run a vector of outputs at a time ([`crate::fir_simd`]).
     periodic: Option<Periodic>,
 }
 
@@ -339,7 +345,7 @@ impl<T: candle_core::WithDType> Band<T> {
         let periodic = (T::DTYPE == DType::F32)
             .then(|| {
                 let w32: Vec<f32> = weights.iter().map(|w| w.to_f64() as f32).collect();
-                Periodic::find(&first, &w32, width)
+                Periodic::find(&first, &w32, width, SimdFamily::active())
             })
             .flatten();
         Some(Self {
@@ -495,6 +501,7 @@ mod tests {
     use candle_core::Var;
 
     use super::*;
+    use crate::simd::with_simd_family;
     use crate::testing::max_abs_diff;
     use photomat_core::rng::pseudo_random;
 
@@ -581,8 +588,10 @@ mod tests {
         // StyleGAN2's [1, 3, 3, 1] / 8 with its real, equal weights in every row: blur
         // (period 1, shift 1), ×2 down (1, 2) and its transpose (2, 1), zero-padded and
         // wrapped, on even and odd lengths, rows of 9 to 65 outputs (a partial last vector,
-        // one and several vectors). On AVX-512 the periodic run must be found (else this
-        // tests nothing new) and the f32 pass must equal the dense f64 product.
+        // one and several vectors), on every kernel family this CPU runs (forced, so that an
+        // AVX-512 machine tests the AVX2 rows too). On a vector family the periodic run must
+        // be found (else this tests nothing new); on every family the f32 pass must equal
+        // the dense f64 product, and the scalar dot products to the bit.
         let dev = Device::Cpu;
         let taps = [1.0, 3.0, 3.0, 1.0].map(|t| t / 8.0);
         let filter = |n_out: usize, n_in: usize, step: usize, wrap: bool| {
@@ -602,7 +611,21 @@ mod tests {
                 .collect();
             AxisMatrix::from_rows(n_in, &rows).expect("valid rows")
         };
-        let avx512 = crate::avx512::has_avx512();
+        for family in SimdFamily::ALL
+            .into_iter()
+            .filter(|&f| f <= SimdFamily::detected())
+        {
+            with_simd_family(family, || periodic_case(family, &dev, &filter)).1?;
+        }
+        Ok(())
+    }
+
+    /// [`periodic_rows_match_the_dense_product`] on one kernel family.
+    fn periodic_case(
+        family: SimdFamily,
+        dev: &Device,
+        filter: &dyn Fn(usize, usize, usize, bool) -> AxisMatrix,
+    ) -> Result<()> {
         for n in [64, 40, 33, 20] {
             for wrap in [false, true] {
                 let blur = filter(n + 1, n, 1, wrap);
@@ -612,14 +635,15 @@ mod tests {
                 {
                     let case = format!("n {n} wrap {wrap} ({period}, {shift})");
                     let band = Band::<f32>::new(&m).expect("a band");
-                    if avx512 {
-                        let p = band.periodic.expect("a periodic run");
-                        assert_eq!((p.period, p.shift), (period, shift), "{case}");
+                    let case = format!("{family:?} {case}");
+                    match band.periodic {
+                        Some(p) => assert_eq!((p.period, p.shift), (period, shift), "{case}"),
+                        None => assert_eq!(family, SimdFamily::Scalar, "{case}: no periodic run"),
                     }
-                    let x = pseudo_random((2, 3, 5, m.n_in()), n as u64, DType::F64, &dev)?;
+                    let x = pseudo_random((2, 3, 5, m.n_in()), n as u64, DType::F64, dev)?;
                     let got =
                         axis_pass(&x.to_dtype(DType::F32)?, Arc::new(m.clone()), Axis::Width)?;
-                    let dense = m.to_dense(DType::F64, &dev)?;
+                    let dense = m.to_dense(DType::F64, dev)?;
                     let want = x
                         .reshape((30, m.n_in()))?
                         .matmul(&dense.t()?)?

@@ -1,5 +1,6 @@
-//! The periodic interior of a FIR width pass on AVX-512: the rows of [`crate::fir`]'s band form
-//! that repeat, computed 16 outputs per vector instead of one dot product per output.
+//! The periodic interior of a FIR width pass: the rows of [`crate::fir`]'s band form that
+//! repeat, computed a vector of outputs at a time (16 on AVX-512, 8 on AVX2) instead of one
+//! dot product per output.
 //!
 //! StyleGAN2's `[1, 3, 3, 1]` filters (Karras et al. 2020, Appendix B) give axis matrices whose
 //! rows, away from the edges, repeat with a period of 1 or 2 outputs and move 1 or 2 input
@@ -12,16 +13,17 @@
 //! out[lo + r + period·m] = Σ_t w_r[t] · x[first_r + t + shift·m]     (m = 0 … count − 1)
 //! ```
 //!
-//! is, per tap, one multiply-add of 16 consecutive `m` at a time: shift 1 reads 16
-//! consecutive floats, shift 2 the even lanes of 32 (one two-source permute), and period 2
-//! interleaves its two phases' vectors into 32 consecutive outputs (two permutes). The rows
+//! is, per tap, one multiply-add of a vector of consecutive `m` at a time: shift 1 reads
+//! consecutive floats, shift 2 the even lanes of two vectors' worth, and period 2 interleaves
+//! its two phases' vectors into twice as many consecutive outputs. Written once over
+//! `Simd`. The rows
 //! are short (17–65 outputs in the discriminator), so nothing is allocated per row and the
 //! last vector is masked. Slice loops the compiler vectorised on its own were slower than
 //! the scalar dot products (`docs/benchmarks/conv-kernels.md`, "Strided input gradients on the
 //! direct kernels", tried and not adopted): the baseline x86-64 target vectorises only 4 wide, and
 //! the per-row setup ate the rest.
 
-use crate::avx512::{LANES, has_avx512, lane_mask};
+use crate::simd::{Kernel, Simd, SimdFamily, on_family};
 
 /// Widest band the interior runs: the `[1, 3, 3, 1]` filter's 4 taps.
 pub(crate) const MAX_TAPS: usize = 4;
@@ -39,15 +41,22 @@ pub(crate) struct Periodic {
     taps: usize,
     first: [usize; 2],
     weights: [[f32; MAX_TAPS]; 2],
+    /// The vector family [`Periodic::run`] runs on.
+    family: SimdFamily,
 }
 
 impl Periodic {
     /// The longest periodic run around the middle row of a band (`first[j]`, the first column
     /// of row `j`, `usize::MAX` for a row outside the band form; `weights[j·taps..]`, its
-    /// weights), or `None` when there is none long enough, the band is wider than
-    /// [`MAX_TAPS`], or the CPU lacks AVX-512F.
-    pub(crate) fn find(first: &[usize], weights: &[f32], taps: usize) -> Option<Self> {
-        if taps == 0 || taps > MAX_TAPS || !has_avx512() {
+    /// weights), to run on `family`, or `None` when there is none long enough, the band is
+    /// wider than [`MAX_TAPS`], or `family` is [`SimdFamily::Scalar`].
+    pub(crate) fn find(
+        first: &[usize],
+        weights: &[f32],
+        taps: usize,
+        family: SimdFamily,
+    ) -> Option<Self> {
+        if taps == 0 || taps > MAX_TAPS || family == SimdFamily::Scalar {
             return None;
         }
         let n = first.len();
@@ -96,6 +105,7 @@ impl Periodic {
                 taps,
                 first: f,
                 weights: w,
+                family,
             });
         }
         None
@@ -113,71 +123,76 @@ impl Periodic {
             last <= x.len() && self.rows().end <= out.len(),
             "periodic FIR run outside its row"
         );
-        // SAFETY: `find` returned Some only with AVX-512F; the assertion keeps every read and
-        // write inside the row (`row_avx512`).
-        #[cfg(target_arch = "x86_64")]
-        unsafe {
-            row_avx512(self, x, out)
-        }
-        #[cfg(not(target_arch = "x86_64"))]
-        unreachable!("AVX-512 only: Periodic::find returns None on this architecture")
+        // SAFETY: `find` returned Some only for a vector family, one the CPU has (the
+        // caller's [`SimdFamily::active`]); the assertion keeps every read and write inside the
+        // row (`Row`).
+        on_family!(self.family, S => unsafe { S::vectorize(Row { p: self, x, out }) });
     }
 }
 
-/// [`Periodic::run`]'s vectors.
-///
-/// # Safety
-/// AVX-512F is available; every phase's reads `x[first_r .. first_r + shift·(count − 1) +
-/// taps]` and the writes `out[lo .. lo + period·count]` are inside the slices.
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
-unsafe fn row_avx512(p: &Periodic, x: &[f32], out: &mut [f32]) {
-    use std::arch::x86_64::*;
-    let xp = x.as_ptr();
-    let op = unsafe { out.as_mut_ptr().add(p.lo) };
-    // The interleave of (a, b): a0 b0 a1 b1 …
-    let low = _mm512_setr_epi32(0, 16, 1, 17, 2, 18, 3, 19, 4, 20, 5, 21, 6, 22, 7, 23);
-    let high = _mm512_setr_epi32(8, 24, 9, 25, 10, 26, 11, 27, 12, 28, 13, 29, 14, 30, 15, 31);
-    // Phase r's 16 sums for m = m0 … m0 + lanes − 1.
-    let phase = |r: usize, m0: usize, lanes: usize| -> __m512 {
-        let mut acc = _mm512_setzero_ps();
-        for t in 0..p.taps {
-            let w = _mm512_set1_ps(p.weights[r][t]);
-            let at = p.first[r] + t + p.shift * m0;
-            // SAFETY: the loads read only masked lanes, inside x (the caller's contract).
-            let v = unsafe {
-                if p.shift == 1 {
-                    _mm512_maskz_loadu_ps(lane_mask(lanes), xp.add(at))
+/// [`Periodic::run`]'s vectors, as a [`Kernel`]: every phase's reads `x[first_r .. first_r +
+/// shift·(count − 1) + taps]` and the writes `out[lo .. lo + period·count]` are inside the
+/// slices.
+struct Row<'a> {
+    p: &'a Periodic,
+    x: &'a [f32],
+    out: &'a mut [f32],
+}
+
+impl Kernel for Row<'_> {
+    type Output = ();
+
+    #[inline(always)]
+    unsafe fn run<S: Simd>(self) {
+        let Row { p, x, out } = self;
+        let xp = x.as_ptr();
+        // SAFETY (every block below): the CPU has S's features; loads and stores touch only
+        // masked lanes inside the slices (the contract).
+        let op = unsafe { out.as_mut_ptr().add(p.lo) };
+        for m0 in (0..p.count).step_by(S::LANES) {
+            let lanes = S::LANES.min(p.count - m0);
+            unsafe {
+                if p.period == 1 {
+                    S::store_masked(S::mask(lanes), op.add(m0), phase::<S>(p, xp, 0, m0, lanes));
                 } else {
-                    crate::avx512::load_even_lanes(xp.add(at), lanes)
-                }
-            };
-            // Multiply, then add: rounded as the scalar dot products of the edge rows, so that
-            // a row's value does not depend on whether it falls in the run (rolling a tileable
-            // generator's input by whole cells rolls its output exactly).
-            acc = _mm512_add_ps(_mm512_mul_ps(v, w), acc);
-        }
-        acc
-    };
-    for m0 in (0..p.count).step_by(LANES) {
-        let lanes = LANES.min(p.count - m0);
-        // SAFETY: the stores write only masked lanes, inside out (the caller's contract).
-        unsafe {
-            if p.period == 1 {
-                _mm512_mask_storeu_ps(op.add(m0), lane_mask(lanes), phase(0, m0, lanes));
-            } else {
-                let (a, b) = (phase(0, m0, lanes), phase(1, m0, lanes));
-                let n = 2 * lanes;
-                _mm512_mask_storeu_ps(
-                    op.add(2 * m0),
-                    lane_mask(n),
-                    _mm512_permutex2var_ps(a, low, b),
-                );
-                if n > LANES {
-                    let hi = _mm512_permutex2var_ps(a, high, b);
-                    _mm512_mask_storeu_ps(op.add(2 * m0 + LANES), lane_mask(n - LANES), hi);
+                    let (lo, hi) = S::interleave(
+                        phase::<S>(p, xp, 0, m0, lanes),
+                        phase::<S>(p, xp, 1, m0, lanes),
+                    );
+                    let n = 2 * lanes;
+                    S::store_masked(S::mask(n), op.add(2 * m0), lo);
+                    if n > S::LANES {
+                        S::store_masked(S::mask(n - S::LANES), op.add(2 * m0 + S::LANES), hi);
+                    }
                 }
             }
         }
     }
+}
+
+/// Phase `r`'s sums of a run for `m = m0 … m0 + lanes − 1` (a function, not a closure, so
+/// that it is inlined into [`Row::run`] and compiled with its family's features).
+///
+/// # Safety
+/// As [`Row::run`]'s.
+#[inline(always)]
+unsafe fn phase<S: Simd>(p: &Periodic, xp: *const f32, r: usize, m0: usize, lanes: usize) -> S::V {
+    // SAFETY (every block): the caller's.
+    let mut acc = unsafe { S::zero() };
+    for t in 0..p.taps {
+        let w = unsafe { S::splat(p.weights[r][t]) };
+        let at = p.first[r] + t + p.shift * m0;
+        let v = unsafe {
+            if p.shift == 1 {
+                S::load_masked(S::mask(lanes), xp.add(at))
+            } else {
+                S::load_even(xp.add(at), lanes)
+            }
+        };
+        // Multiply, then add: rounded as the scalar dot products of the edge rows, so that a
+        // row's value does not depend on whether it falls in the run (rolling a tileable
+        // generator's input by whole cells rolls its output exactly).
+        acc = unsafe { S::add(S::mul(v, w), acc) };
+    }
+    acc
 }

@@ -31,10 +31,11 @@ use candle_core::{CpuStorage, CustomOp3, Layout, Result, Shape, Tensor, WithDTyp
 
 use crate::alloc::output_buffer;
 use crate::conv::{
-    Conv2dSpec, Geometry, apply_input_grad, apply_weight_grad, contiguous, conv2d_reference,
-    expect_shape, fast_path, forward_into, needed,
+    apply_input_grad, apply_weight_grad, conv2d_reference, fast_path, forward_into, needed,
 };
+use crate::conv_geometry::{Conv2dSpec, Geometry};
 use crate::plane_ops::{map_planes, plane_dot, scale_planes, scale_planes_in_place};
+use crate::storage::{contiguous, expect_shape};
 
 /// `d ⊙ conv(s ⊙ x, W)` with `scales` = `s ‖ d` (B, C_in + C_out) when `demodulate`, `s`
 /// alone (B, C_in) otherwise; stride, padding and padding mode from `spec`.
@@ -73,16 +74,16 @@ pub fn modulated_conv2d(
 /// # Shapes
 /// As [`modulated_conv2d`].
 pub fn modulated_conv2d_reference(
-    x: &Tensor,
-    w: &Tensor,
+    input: &Tensor,
+    weight: &Tensor,
     scales: &Tensor,
     demodulate: bool,
     spec: Conv2dSpec,
 ) -> Result<Tensor> {
-    let (b, ci, _, _) = x.dims4()?;
-    let co = w.dim(0)?;
+    let (b, ci, _, _) = input.dims4()?;
+    let co = weight.dim(0)?;
     let s = scales.narrow(1, 0, ci)?.reshape((b, ci, 1, 1))?;
-    let y = conv2d_reference(&x.broadcast_mul(&s)?, w, spec)?;
+    let y = conv2d_reference(&input.broadcast_mul(&s)?, weight, spec)?;
     if demodulate {
         y.broadcast_mul(&scales.narrow(1, ci, co)?.reshape((b, co, 1, 1))?)
     } else {
@@ -133,22 +134,28 @@ impl CustomOp3 for ModulatedConv {
         &self,
         x: &CpuStorage,
         lx: &Layout,
-        w: &CpuStorage,
-        lw: &Layout,
-        s: &CpuStorage,
-        ls: &Layout,
+        weight: &CpuStorage,
+        l_weight: &Layout,
+        scales: &CpuStorage,
+        l_scales: &Layout,
     ) -> Result<(CpuStorage, Shape)> {
         let name = self.name();
         expect_shape(lx, &self.g.x_shape(), name, "input")?;
-        expect_shape(lw, &self.g.w_shape(), name, "weight")?;
-        let out = match (x, w, s) {
-            (CpuStorage::F32(x), CpuStorage::F32(w), CpuStorage::F32(s)) => {
-                let (x, w) = (contiguous(x, lx, name)?, contiguous(w, lw, name)?);
-                CpuStorage::F32(self.run(x, w, contiguous(s, ls, name)?))
+        expect_shape(l_weight, &self.g.w_shape(), name, "weight")?;
+        let out = match (x, weight, scales) {
+            (CpuStorage::F32(x), CpuStorage::F32(weight), CpuStorage::F32(scales)) => {
+                let (x, weight) = (
+                    contiguous(x, lx, name)?,
+                    contiguous(weight, l_weight, name)?,
+                );
+                CpuStorage::F32(self.run(x, weight, contiguous(scales, l_scales, name)?))
             }
-            (CpuStorage::F64(x), CpuStorage::F64(w), CpuStorage::F64(s)) => {
-                let (x, w) = (contiguous(x, lx, name)?, contiguous(w, lw, name)?);
-                CpuStorage::F64(self.run(x, w, contiguous(s, ls, name)?))
+            (CpuStorage::F64(x), CpuStorage::F64(weight), CpuStorage::F64(scales)) => {
+                let (x, weight) = (
+                    contiguous(x, lx, name)?,
+                    contiguous(weight, l_weight, name)?,
+                );
+                CpuStorage::F64(self.run(x, weight, contiguous(scales, l_scales, name)?))
             }
             _ => bail!("{name}: operands must all be f32 or all f64"),
         };
@@ -198,7 +205,7 @@ mod tests {
     use candle_core::{DType, Device, Var};
 
     use super::*;
-    use crate::conv::PaddingMode;
+    use crate::conv_geometry::PaddingMode;
     use crate::testing::max_abs_diff;
     use photomat_core::rng::pseudo_random;
 

@@ -20,8 +20,11 @@
 use candle_core::{CpuStorage, CustomOp3, DType, Layout, Result, Shape, Tensor, WithDType, bail};
 use rayon::prelude::*;
 
-use crate::activation::{LeakyReluGrad, slice};
+use crate::activation::{LeakyReluGrad, leaky_relu_gain};
 use crate::alloc::output_buffer;
+use crate::bias::channel_sums;
+use crate::plane_ops::sum_over_channels;
+use crate::storage::contiguous;
 
 /// `gain · LeakyReLU(x + noise + bias, slope)`, noise broadcast over channels, bias over
 /// batch and pixels; slope ∈ [0, 1], gain > 0.
@@ -59,7 +62,7 @@ pub fn noise_bias_leaky_relu_gain(
         let z = x
             .broadcast_add(noise)?
             .broadcast_add(&bias.reshape((1, c, 1, 1))?)?;
-        return crate::leaky_relu_gain(&z, slope, gain);
+        return leaky_relu_gain(&z, slope, gain);
     }
     x.contiguous()?.apply_op3(
         &noise.contiguous()?,
@@ -135,17 +138,17 @@ impl CustomOp3 for NoiseBiasLeakyRelu {
         let out = match (x, noise, bias) {
             (CpuStorage::F32(x), CpuStorage::F32(nz), CpuStorage::F32(bi)) => {
                 let (x, nz, bi) = (
-                    slice(x, lx, name)?,
-                    slice(nz, ln, name)?,
-                    slice(bi, lb, name)?,
+                    contiguous(x, lx, name)?,
+                    contiguous(nz, ln, name)?,
+                    contiguous(bi, lb, name)?,
                 );
                 CpuStorage::F32(self.run(x, nz, bi, hw))
             }
             (CpuStorage::F64(x), CpuStorage::F64(nz), CpuStorage::F64(bi)) => {
                 let (x, nz, bi) = (
-                    slice(x, lx, name)?,
-                    slice(nz, ln, name)?,
-                    slice(bi, lb, name)?,
+                    contiguous(x, lx, name)?,
+                    contiguous(nz, ln, name)?,
+                    contiguous(bi, lb, name)?,
                 );
                 CpuStorage::F64(self.run(x, nz, bi, hw))
             }
@@ -168,8 +171,8 @@ impl CustomOp3 for NoiseBiasLeakyRelu {
         };
         // The mask is constant (zero derivative a.e.): detached, as in `activation`.
         let dz = op.apply(grad, &y.detach())?;
-        let dnoise = crate::plane_ops::sum_over_channels(&dz)?;
-        let dbias = crate::channel_sums(&dz)?;
+        let dnoise = sum_over_channels(&dz)?;
+        let dbias = channel_sums(&dz)?;
         Ok((Some(dz), Some(dnoise), Some(dbias)))
     }
 }

@@ -22,8 +22,8 @@
 use candle_core::{CpuStorage, CustomOp1, Layout, Result, Shape, Tensor, WithDType, bail};
 use rayon::prelude::*;
 
-use crate::activation::slice;
 use crate::alloc::output_buffer;
+use crate::storage::contiguous;
 
 use crate::threads::ELEMENTWISE_CHUNK as CHUNK;
 
@@ -181,8 +181,8 @@ impl CustomOp1 for Gather {
             );
         }
         let out = match x {
-            CpuStorage::F32(x) => CpuStorage::F32(self.run(slice(x, lx, self.name())?)),
-            CpuStorage::F64(x) => CpuStorage::F64(self.run(slice(x, lx, self.name())?)),
+            CpuStorage::F32(x) => CpuStorage::F32(self.run(contiguous(x, lx, self.name())?)),
+            CpuStorage::F64(x) => CpuStorage::F64(self.run(contiguous(x, lx, self.name())?)),
             _ => bail!("{}: expected f32 or f64", self.name()),
         };
         Ok((out, self.0.window_shape()))
@@ -239,8 +239,8 @@ impl CustomOp1 for Scatter {
             );
         }
         let out = match g {
-            CpuStorage::F32(g) => CpuStorage::F32(self.run(slice(g, lg, self.name())?)),
-            CpuStorage::F64(g) => CpuStorage::F64(self.run(slice(g, lg, self.name())?)),
+            CpuStorage::F32(g) => CpuStorage::F32(self.run(contiguous(g, lg, self.name())?)),
+            CpuStorage::F64(g) => CpuStorage::F64(self.run(contiguous(g, lg, self.name())?)),
             _ => bail!("{}: expected f32 or f64", self.name()),
         };
         Ok((out, self.0.input_shape()))

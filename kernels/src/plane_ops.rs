@@ -33,8 +33,8 @@ use candle_core::{
 };
 use rayon::prelude::*;
 
-use crate::activation::slice;
 use crate::alloc::output_buffer;
+use crate::storage::contiguous;
 
 use crate::threads::ELEMENTWISE_CHUNK as CHUNK;
 
@@ -217,12 +217,16 @@ impl CustomOp2 for ScalePlanes {
     ) -> Result<(CpuStorage, Shape)> {
         let (name, plane) = (self.name(), plane_len(lx));
         let out = match (x, s) {
-            (CpuStorage::F32(x), CpuStorage::F32(s)) => {
-                CpuStorage::F32(Self::run(slice(x, lx, name)?, slice(s, ls, name)?, plane))
-            }
-            (CpuStorage::F64(x), CpuStorage::F64(s)) => {
-                CpuStorage::F64(Self::run(slice(x, lx, name)?, slice(s, ls, name)?, plane))
-            }
+            (CpuStorage::F32(x), CpuStorage::F32(s)) => CpuStorage::F32(Self::run(
+                contiguous(x, lx, name)?,
+                contiguous(s, ls, name)?,
+                plane,
+            )),
+            (CpuStorage::F64(x), CpuStorage::F64(s)) => CpuStorage::F64(Self::run(
+                contiguous(x, lx, name)?,
+                contiguous(s, ls, name)?,
+                plane,
+            )),
             _ => bail!("{name}: operands must both be f32 or both f64"),
         };
         Ok((out, lx.shape().clone()))
@@ -276,14 +280,14 @@ impl CustomOp2 for PlaneDot {
         let planes = dims[0] * dims[1];
         let out = match (a, b) {
             (CpuStorage::F32(a), CpuStorage::F32(b)) => CpuStorage::F32(Self::run(
-                slice(a, la, name)?,
-                slice(b, lb, name)?,
+                contiguous(a, la, name)?,
+                contiguous(b, lb, name)?,
                 plane,
                 planes,
             )),
             (CpuStorage::F64(a), CpuStorage::F64(b)) => CpuStorage::F64(Self::run(
-                slice(a, la, name)?,
-                slice(b, lb, name)?,
+                contiguous(a, la, name)?,
+                contiguous(b, lb, name)?,
                 plane,
                 planes,
             )),
@@ -355,8 +359,12 @@ impl CustomOp1 for SumOverChannels {
         let channels = dims[1];
         dims[1] = 1;
         let out = match x {
-            CpuStorage::F32(x) => CpuStorage::F32(Self::run(slice(x, lx, name)?, channels, plane)),
-            CpuStorage::F64(x) => CpuStorage::F64(Self::run(slice(x, lx, name)?, channels, plane)),
+            CpuStorage::F32(x) => {
+                CpuStorage::F32(Self::run(contiguous(x, lx, name)?, channels, plane))
+            }
+            CpuStorage::F64(x) => {
+                CpuStorage::F64(Self::run(contiguous(x, lx, name)?, channels, plane))
+            }
             _ => bail!("{name}: expected f32 or f64"),
         };
         Ok((out, Shape::from(dims)))

@@ -1,4 +1,4 @@
-//! Input gradients of strided convolutions on the register tiles of [`crate::direct_conv`], by
+//! Input gradients of strided convolutions on the register tiles of [`crate::conv_tiles`], by
 //! the polyphase decomposition of a transposed convolution.
 //!
 //! Along one axis, a convolution of stride `s`, kernel `k` and padding `p` reads input position
@@ -15,7 +15,7 @@
 //! `s²` phases of `dx` are `s²` such correlations, together `kh·kw` taps per input channel
 //! (the FLOP of the forward, where zero-insertion into `dy` would do `s²` times as many and
 //! im2col + `gemm` + col2im copies every product through a `kh·kw`-row column matrix). Each
-//! phase runs on `direct_conv::run_tiles` over one padded copy of `dy` that every phase
+//! phase runs on `conv_tiles::run_tiles` over one padded copy of `dy` that every phase
 //! reads at its own offset (`dy` positions outside the output wrap, for circular padding, or
 //! are zeros), and its results are interleaved into `dx`. This is the decomposition of
 //! transposed convolutions into stride-1 ones used by deconvolution layers (Shi et al., "Is
@@ -30,9 +30,9 @@
 use rayon::prelude::*;
 
 use crate::alloc::output_buffer;
-use crate::avx512::LANES;
-use crate::conv::Geometry;
-use crate::direct_conv::{self, MIN_BAND_ROWS, PAD_BAND_BYTES, TileGrid};
+use crate::conv_geometry::Geometry;
+use crate::conv_tiles::{self, MIN_BAND_ROWS, PAD_BAND_BYTES, TileGrid};
+use crate::simd::{Simd, SimdFamily, on_family};
 
 /// Bytes of the phases' results one task holds before merging them into `dx`: half of this
 /// VM's 2 MiB L2, so that the merge reads them from cache, not memory.
@@ -121,9 +121,9 @@ impl AxisPlan {
 }
 
 /// The row and column plans of `g`'s input gradient, when [`input_grad`] computes it.
-fn plans(g: &Geometry) -> Option<(AxisPlan, AxisPlan)> {
+fn plans(g: &Geometry, family: SimdFamily) -> Option<(AxisPlan, AxisPlan)> {
     let s = g.stride;
-    if s < 2 || !crate::avx512::has_avx512() {
+    if s < 2 || family == SimdFamily::Scalar {
         return None;
     }
     // dy's wrap has period H_out: the forward's only when H = s·H_out (module docs).
@@ -135,20 +135,28 @@ fn plans(g: &Geometry) -> Option<(AxisPlan, AxisPlan)> {
     // Every phase row of dx holds at least one vector, as the forward's output rows must.
     cols.phases
         .iter()
-        .all(|ph| ph.len >= LANES)
+        .all(|ph| ph.len >= family.lanes())
         .then_some((rows, cols))
 }
 
-/// Whether [`input_grad`] computes this (strided) convolution's input gradient.
-pub(crate) fn supports(g: &Geometry) -> bool {
-    plans(g).is_some()
+/// Whether [`input_grad`] computes this (strided) convolution's input gradient on `family`.
+pub(crate) fn supports(g: &Geometry, family: SimdFamily) -> bool {
+    plans(g, family).is_some()
 }
 
 /// Input gradient of a strided convolution: writes every element of `dx` (B·C_in·H·W) from
 /// `dy` (B·C_out·H_out·W_out) and `w` (C_out·C_in·kh·kw), phase by phase (module docs).
 /// Requires [`supports`].
-pub(crate) fn input_grad(g: &Geometry, dy: &[f32], w: &[f32], dx: &mut [f32], threads: usize) {
-    let (rows, cols) = plans(g).expect("direct conv: unsupported strided input gradient");
+pub(crate) fn input_grad(
+    g: &Geometry,
+    dy: &[f32],
+    w: &[f32],
+    dx: &mut [f32],
+    on: (usize, SimdFamily),
+) {
+    // Threads, and the family the CPU has (the caller's [`SimdFamily::active`]).
+    let (threads, family) = on;
+    let (rows, cols) = plans(g, family).expect("direct conv: unsupported strided input gradient");
     // Padded dy bytes per phase row of dx.
     let row_bytes = 4 * g.co * cols.len;
     // Bytes of the s² phases' results per phase row, before they are merged into dx.
@@ -160,16 +168,17 @@ pub(crate) fn input_grad(g: &Geometry, dy: &[f32], w: &[f32], dx: &mut [f32], th
     if threads > 1 && g.b < threads {
         band = band.min(nq.div_ceil(2 * threads));
     }
-    run_in_bands(g, (&rows, &cols), dy, w, dx, band.clamp(1, nq));
+    let plans = (&rows, &cols);
+    on_family!(family, S => run_in_bands::<S>(g, plans, dy, w, dx, band.clamp(1, nq)));
 }
 
-/// One phase's sub-kernel, flipped, packed in tile order for [`direct_conv::run_tiles`]:
+/// One phase's sub-kernel, flipped, packed in tile order for [`conv_tiles::run_tiles`]:
 /// `OC_BLOCK` input channels of the forward (the phase's outputs), then rows
 /// `(o·T_y + t')·T_x + u'` holding `W[o, c, first_y + s·(T_y − 1 − t'), first_x + s·(T_x − 1 − u')]`.
-fn pack_phase(g: &Geometry, w: &[f32], ry: AxisPhase, rx: AxisPhase) -> Vec<f32> {
+fn pack_phase<S: Simd>(g: &Geometry, w: &[f32], ry: AxisPhase, rx: AxisPhase) -> Vec<f32> {
     let s = g.stride;
     let taps = ry.taps * rx.taps;
-    direct_conv::pack_weights(g.ci, g.co * taps, |c, dst| {
+    conv_tiles::pack_weights::<S>(g.ci, g.co * taps, |c, dst| {
         let mut dst = dst.iter_mut();
         for o in 0..g.co {
             let kernel = &w[(o * g.ci + c) * g.kh * g.kw..][..g.kh * g.kw];
@@ -186,7 +195,7 @@ fn pack_phase(g: &Geometry, w: &[f32], ry: AxisPhase, rx: AxisPhase) -> Vec<f32>
 /// [`input_grad`] in bands of `band` phase rows `q` (dx rows `s·q .. s·q + s`): the (image,
 /// band) pairs are the parallel tasks, each padding the `dy` rows its band reads once for
 /// all `s²` phases.
-fn run_in_bands(
+fn run_in_bands<S: Simd>(
     g: &Geometry,
     (rows, cols): (&AxisPlan, &AxisPlan),
     dy: &[f32],
@@ -211,7 +220,7 @@ fn run_in_bands(
             let taps = (0..ry.taps)
                 .flat_map(|t| (0..rx.taps).map(move |u| t * row + u))
                 .collect();
-            (ry, rx, pack_phase(g, w, ry, rx), taps)
+            (ry, rx, pack_phase::<S>(g, w, ry, rx), taps)
         })
         .collect();
     // A band of q rows reads padded dy rows q0 + lo .. q1 − 1 + hi.
@@ -270,7 +279,7 @@ fn run_in_bands(
                 // by this task; `dyp` holds every padded row and column the phase reads
                 // (`AxisPlan`), and a dropped texel reads at most `row − len_x` floats past
                 // its row, inside the next padded row.
-                unsafe { direct_conv::run_tiles(&grid, dyp, packed, out_p) };
+                unsafe { conv_tiles::run_tiles::<S>(&grid, dyp, packed, out_p) };
             }
             // dx rows s·q0 .. s·q1 of image i, each interleaving the lines of its row phase's
             // column phases: row by row, so that every dx row is written once, whole.
@@ -355,7 +364,9 @@ mod tests {
     use candle_core::{DType, Device, Result, Tensor};
 
     use super::*;
-    use crate::conv::{Conv2dSpec, apply_input_grad};
+    use crate::conv::apply_input_grad;
+    use crate::conv_geometry::{Conv2dSpec, PaddingMode};
+    use crate::simd::vector_families;
     use crate::testing::max_abs_diff;
     use photomat_core::rng::pseudo_random;
 
@@ -397,37 +408,41 @@ mod tests {
 
     #[test]
     fn strided_input_gradient_in_bands_equals_the_whole_image() -> Result<()> {
-        if !crate::avx512::has_avx512() {
-            eprintln!("no AVX-512 on this CPU: the direct kernels are never used");
-            return Ok(());
-        }
         // 17 phase rows (33 input rows) in bands of 3, the last of 2: each band pads its own
         // dy rows, zero or wrapped, and writes only its s rows per phase row.
         let dev = Device::Cpu;
-        for (h, pad, k) in [(33, 0, 3), (32, 1, 4)] {
-            for spec in [Conv2dSpec::zeros(2, pad), Conv2dSpec::circular(2, pad)] {
-                let g = Geometry::new((2, 3, h, 40), (5, 3, k, k), spec)?;
-                let Some(plans) = plans(&g) else {
-                    assert!(spec.mode == crate::conv::PaddingMode::Circular && h == 33);
-                    continue;
-                };
-                let dy = pseudo_random(g.y_shape(), 21, DType::F32, &dev)?;
-                let wt = pseudo_random((5, 3, k, k), 22, DType::F32, &dev)?;
-                let (dyv, wv) = (
-                    dy.flatten_all()?.to_vec1::<f32>()?,
-                    wt.flatten_all()?.to_vec1::<f32>()?,
-                );
-                let n = 2 * 3 * h * 40;
-                let mut whole = vec![f32::NAN; n];
-                run_in_bands(&g, (&plans.0, &plans.1), &dyv, &wv, &mut whole, 17);
-                let mut banded = vec![f32::NAN; n];
-                run_in_bands(&g, (&plans.0, &plans.1), &dyv, &wv, &mut banded, 3);
-                // Same sums in the same order: equal to the bit.
-                assert_eq!(whole, banded, "{spec:?} {h}");
-                let reference =
-                    apply_input_grad(g, &dy.to_dtype(DType::F64)?, &wt.to_dtype(DType::F64)?)?;
-                let banded = Tensor::from_vec(banded, (2, 3, h, 40), &dev)?.to_dtype(DType::F64)?;
-                assert!(max_abs_diff(&banded, &reference)? < 1e-4, "{spec:?} {h}");
+        for family in vector_families() {
+            for (h, pad, k) in [(33, 0, 3), (32, 1, 4)] {
+                for spec in [Conv2dSpec::zeros(2, pad), Conv2dSpec::circular(2, pad)] {
+                    let g = Geometry::new((2, 3, h, 40), (5, 3, k, k), spec)?;
+                    let Some(plans) = plans(&g, family) else {
+                        assert!(spec.mode == PaddingMode::Circular && h == 33);
+                        continue;
+                    };
+                    let dy = pseudo_random(g.y_shape(), 21, DType::F32, &dev)?;
+                    let wt = pseudo_random((5, 3, k, k), 22, DType::F32, &dev)?;
+                    let (dyv, wv) = (
+                        dy.flatten_all()?.to_vec1::<f32>()?,
+                        wt.flatten_all()?.to_vec1::<f32>()?,
+                    );
+                    let run = |band: usize| {
+                        let mut dx = vec![f32::NAN; 2 * 3 * h * 40];
+                        let plans = (&plans.0, &plans.1);
+                        on_family!(family, S => {
+                            run_in_bands::<S>(&g, plans, &dyv, &wv, &mut dx, band)
+                        });
+                        dx
+                    };
+                    let (whole, banded) = (run(17), run(3));
+                    // Same sums in the same order: equal to the bit.
+                    assert_eq!(whole, banded, "{family:?} {spec:?} {h}");
+                    let reference =
+                        apply_input_grad(g, &dy.to_dtype(DType::F64)?, &wt.to_dtype(DType::F64)?)?;
+                    let banded =
+                        Tensor::from_vec(banded, (2, 3, h, 40), &dev)?.to_dtype(DType::F64)?;
+                    let err = max_abs_diff(&banded, &reference)?;
+                    assert!(err < 1e-4, "{family:?} {spec:?} {h}: {err}");
+                }
             }
         }
         Ok(())

@@ -260,6 +260,8 @@ struct Report {
     version: String,
     threads: usize,
     platform: String,
+    /// The vector family of photomat-kernels' direct kernels (`avx512`, `avx2`, `scalar`).
+    kernels: &'static str,
     size: usize,
     multiplier: f64,
     batch: usize,
@@ -643,6 +645,7 @@ pub fn run(args: &Args, out: &mut dyn Write) -> anyhow::Result<()> {
         version: format!("photomat {}", env!("CARGO_PKG_VERSION")),
         threads: photomat_kernels::alloc::thread_count(),
         platform: format!("{} {}", std::env::consts::ARCH, std::env::consts::OS),
+        kernels: photomat_kernels::simd::SimdFamily::active().name(),
         size: args.size,
         multiplier: args.multiplier,
         batch: args.batch,
